@@ -1,0 +1,86 @@
+"""Command line: ``bayes-disc COMMAND ...`` (SPEC §6). Bad input: one-line reason on stderr, exit 2."""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from . import __version__
+from .observation.cases import CaseFileError, load_case, simulate_case
+from .observation.config_io import ConfigError
+from .observation.markers import MarkerFileError, write_marker_csv
+
+#: exceptions that mean "bad input" rather than a bug: reported in one line, exit status 2
+INPUT_ERRORS: tuple[type[Exception], ...] = (ConfigError, MarkerFileError, CaseFileError, FileNotFoundError)
+
+
+def _cmd_simulate(args) -> int:
+    case = load_case(args.case)
+    table, _ = simulate_case(case)
+    out = Path(args.output)
+    write_marker_csv(out, table)
+    print(f"wrote {out} ({len(table)} rows, {case.times.size} samples at {case.sample_rate_hz:g} Hz)")
+    return 0
+
+
+def _cmd_synth(args) -> int:
+    from .observation.synth import load_synth_spec, synthesize, write_synth
+    spec, markers_path, truth_path = load_synth_spec(args.config)
+    result = synthesize(spec)
+    write_synth(result, markers_path, truth_path)
+    for name, f in result.truth["flights"].items():
+        lo, hi = f["alpha_range_deg"]
+        print(f"{name}: α {lo:.1f}…{hi:.1f}°, range {f['range_m']:.1f} m, noise {f['noise_m'] * 1e3:.1f} mm, "
+              f"{f['n_dropped']} points dropped")
+    print(f"wrote {markers_path} and {truth_path}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="bayes-disc", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"bayes-disc {__version__}")
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("simulate", help="simulate a case (reference JSON format) to a marker CSV")
+    p.add_argument("case", help="CASE.json in the format of shared/reference/NAME.json")
+    p.add_argument("-o", "--output", required=True, help="output marker CSV (SPEC §4)")
+    p.set_defaults(func=_cmd_simulate)
+    p = sub.add_parser("synth", help="make synthetic flights from a SYNTH.yaml description")
+    p.add_argument("config", help="SYNTH.yaml")
+    p.set_defaults(func=_cmd_synth)
+    _register_optional(sub)
+    return parser
+
+
+def _register_optional(sub) -> None:
+    """Subcommands of front ends that live in their own packages."""
+    try:
+        from .video.cli import register as register_video
+    except ImportError:
+        return
+    register_video(sub)
+
+
+def _input_errors() -> tuple[type[Exception], ...]:
+    errors = INPUT_ERRORS
+    try:
+        from .video.errors import VideoInputError
+        errors = errors + (VideoInputError,)
+    except ImportError:
+        pass
+    return errors
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except _input_errors() as e:
+        print(f"bayes-disc {args.command}: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"bayes-disc {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

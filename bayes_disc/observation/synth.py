@@ -1,0 +1,252 @@
+"""Synthetic flights from a readable description (``bayes-disc synth SYNTH.yaml``).
+
+Each flight is described by its launch: speed [m/s], launch angle above horizontal [deg], heading
+[deg], release position [m], the disc attitude as nose-up pitch [deg] (or the angle of attack at
+release, ``alpha_deg``) and roll [deg], spin r [rad/s] (> 0 clockwise from above: right-handed
+backhand) and optional wobble rates p, q [rad/s]; flight time [s], per-flight marker noise [mm] and a
+dropout fraction. Extra physics terms (``physics:``) make data with effects the base model lacks.
+Output: a SPEC §4 marker file and a truth JSON (coefficients, terms, initial states, noise).
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..physics import (COEFFICIENT_NAMES, LITERATURE, Coefficients, Disc, Environment, get_terms,
+                       literature_coefficients, simulate)
+from ..physics.frames import (angle_of_attack, attitude_from_yaw_pitch_roll, omega_body_from_pqr,
+                              quat_to_matrix)
+from .config_io import ConfigError, Section, load_yaml
+from .markers import FlightObservation, table_from_flights, write_marker_csv
+
+DEFAULT_MARKERS = {"0": [0.100, 0.000, -0.015], "1": [-0.0308, 0.0846, -0.015], "2": [-0.0707, -0.0778, -0.015]}
+
+
+@dataclass(frozen=True)
+class LaunchSpec:
+    """How one synthetic flight is thrown (angles in degrees, SI otherwise)."""
+
+    name: str
+    speed: float
+    launch_angle_deg: float = 0.0
+    heading_deg: float = 0.0
+    position: tuple = (0.0, 0.0, 1.0)
+    pitch_deg: float | None = None
+    alpha_deg: float | None = None
+    roll_deg: float = 0.0
+    spin: float = 60.0
+    p: float = 0.0
+    q: float = 0.0
+    duration: float = 1.0
+    noise_mm: float = 2.0
+    dropout: float = 0.0
+
+    def initial_state(self, wind=None) -> np.ndarray:
+        """State (13,) at release: position, velocity, quaternion, body ω."""
+        gam, psi = np.radians(self.launch_angle_deg), np.radians(self.heading_deg)
+        v = self.speed * np.array([np.cos(gam) * np.cos(psi), np.cos(gam) * np.sin(psi), np.sin(gam)])
+        if self.pitch_deg is not None:
+            pitch = np.radians(self.pitch_deg)
+        else:
+            # air-relative flight-path angle + α; exact for zero roll and wind
+            va = v - (0.0 if wind is None else np.asarray(wind, float))
+            pitch = np.arctan2(va[2], np.hypot(va[0], va[1])) + np.radians(self.alpha_deg or 0.0)
+        q = attitude_from_yaw_pitch_roll(psi, pitch, np.radians(self.roll_deg))
+        w = omega_body_from_pqr((self.p, self.q, self.spin), v, q, wind)
+        return np.concatenate([self.position, v, q, w])
+
+
+@dataclass(frozen=True)
+class SynthSpec:
+    """A synthetic data set: constants, coefficients, extra physics, markers and flights."""
+
+    name: str
+    flights: tuple[LaunchSpec, ...]
+    coefficients: Coefficients = field(default_factory=lambda: literature_coefficients("hummel2002"))
+    disc: Disc = Disc()
+    env: Environment = Environment()
+    markers: dict = field(default_factory=lambda: dict(DEFAULT_MARKERS))
+    physics: dict = field(default_factory=dict)  # term id -> {parameter: value}
+    sample_rate_hz: float = 120.0
+    seed: int = 0
+
+    @property
+    def terms(self):
+        return get_terms(list(self.physics))
+
+    def extension(self) -> np.ndarray:
+        vals = []
+        for term in self.terms:
+            given = self.physics[term.id]
+            for p in term.parameters:
+                vals.append(float(given.get(p.name, p.off_value)))
+        return np.array(vals, float)
+
+    def wind(self) -> np.ndarray | None:
+        w = self.physics.get("wind")
+        return None if w is None else np.array([w.get(k, 0.0) for k in ("wind_x", "wind_y", "wind_z")])
+
+
+@dataclass
+class SynthResult:
+    flights: list[FlightObservation]
+    truth: dict
+
+
+def synthesize(spec: SynthSpec) -> SynthResult:
+    """Simulate every flight, add Gaussian marker noise and drop a random fraction of points."""
+    rng = np.random.default_rng(spec.seed)
+    ids = tuple(spec.markers)
+    mb = np.array([spec.markers[i] for i in ids], float)
+    terms, ext = spec.terms, spec.extension()
+    flights, truth_flights = [], {}
+    for f in spec.flights:
+        times = np.arange(int(round(f.duration * spec.sample_rate_hz)) + 1) / spec.sample_rate_hz
+        y0 = f.initial_state(spec.wind())
+        tr = simulate(y0, spec.coefficients.as_array(), times, disc=spec.disc, env=spec.env, marker_body=mb,
+                      terms=terms, extension=ext if ext.size else None)
+        if not tr.ok[0]:
+            raise ValueError(f"synthetic flight {f.name!r}: simulation failed ({tr.failure_reasons()[0]})")
+        states = tr.states[0]
+        sigma = f.noise_mm / 1000.0
+        pos = tr.markers[0] + rng.normal(0.0, sigma, tr.markers[0].shape)
+        drop = rng.random(pos.shape[:2]) < f.dropout
+        pos[drop] = np.nan
+        flights.append(FlightObservation(name=f.name, source="synth", times=times, marker_ids=ids, positions=pos))
+        alpha = angle_of_attack(states[:, 3:6], states[:, 6:10], spec.wind())
+        omega_w = np.einsum("nij,nj->ni", quat_to_matrix(states[:, 6:10]), states[:, 10:13])
+        truth_flights[f.name] = {
+            "initial_state": {"t": 0.0, "position_m": y0[:3].tolist(), "velocity_m_s": y0[3:6].tolist(),
+                              "quaternion_wxyz_body_to_world": y0[6:10].tolist(),
+                              "omega_body_rad_s": y0[10:13].tolist()},
+            "launch": {k: v for k, v in f.__dict__.items() if k != "name"},
+            "noise_m": sigma,
+            "dropout": f.dropout,
+            "n_dropped": int(drop.sum()),
+            "alpha_range_deg": [float(np.degrees(alpha.min())), float(np.degrees(alpha.max()))],
+            "speed_range_m_s": [float(np.linalg.norm(states[:, 3:6], axis=1).min()),
+                                float(np.linalg.norm(states[:, 3:6], axis=1).max())],
+            "spin_range_rad_s": [float(np.abs(omega_w[:, 2]).min()), float(np.abs(omega_w[:, 2]).max())],
+            "range_m": float(np.linalg.norm(states[-1, :2] - states[0, :2])),
+        }
+    truth = {
+        "name": spec.name, "seed": spec.seed, "sample_rate_hz": spec.sample_rate_hz,
+        "coefficients": spec.coefficients.as_dict(), "physics": spec.physics,
+        "disc": spec.disc.__dict__, "environment": spec.env.__dict__, "markers": spec.markers,
+        "flights": truth_flights,
+    }
+    return SynthResult(flights=flights, truth=truth)
+
+
+def write_synth(result: SynthResult, markers_path, truth_path) -> None:
+    write_marker_csv(markers_path, table_from_flights(result.flights))
+    Path(truth_path).parent.mkdir(parents=True, exist_ok=True)
+    Path(truth_path).write_text(json.dumps(result.truth, indent=2))
+
+
+# ------------------------------------------------------------------------------------------------------
+def _coefficients(path, sec: Section) -> Coefficients:
+    raw = sec.raw("coefficients", "hummel2002")
+    if isinstance(raw, str):
+        if raw not in LITERATURE:
+            raise ConfigError(path, "coefficients", f"unknown set {raw!r}; known: {sorted(LITERATURE)}")
+        return literature_coefficients(raw)
+    base = literature_coefficients("hummel2002").as_dict()
+    c = Section(path, raw, "coefficients")
+    for n in COEFFICIENT_NAMES:
+        base[n] = c.number(n, base[n])
+    c.finish()
+    return Coefficients.from_mapping(base)
+
+
+def read_disc_env(path, sec: Section) -> tuple[Disc, Environment]:
+    d = sec.section("disc")
+    disc = Disc(mass=d.number("mass", Disc.mass, positive=True), Ia=d.number("Ia", Disc.Ia, positive=True),
+                Id=d.number("Id", Disc.Id, positive=True),
+                diameter=d.number("diameter", Disc.diameter, positive=True),
+                area=d.number("area", Disc.area, positive=True))
+    d.finish()
+    e = sec.section("environment")
+    env = Environment(rho=e.number("rho", Environment.rho, positive=True), g=e.number("g", Environment.g, positive=True))
+    e.finish()
+    return disc, env
+
+
+def read_markers(path, sec: Section, default=None) -> dict:
+    raw = sec.raw("markers", default, required=default is None)
+    if not isinstance(raw, dict) or len(raw) < 3:
+        raise ConfigError(path, "markers", "must map at least 3 marker ids to [x, y, z] body positions (m)")
+    m = Section(path, {str(k): v for k, v in raw.items()}, "markers")
+    out = {str(k): m.vector(str(k), 3) for k in list(m.data)}
+    m.finish()
+    pts = np.array(list(out.values()))
+    if np.abs(pts).max() > 1.0:
+        raise ConfigError(path, "markers", "body positions larger than 1 m: give metres, not millimetres")
+    return out
+
+
+def read_physics(path, sec: Section) -> dict:
+    raw = sec.raw("physics", {}) or {}
+    if not isinstance(raw, dict):
+        raise ConfigError(path, "physics", "must map term ids to their parameters")
+    out = {}
+    for tid, params in raw.items():
+        try:
+            (term,) = get_terms([tid])
+        except KeyError as e:
+            raise ConfigError(path, f"physics.{tid}", str(e.args[0])) from None
+        s = Section(path, params, f"physics.{tid}")
+        out[tid] = {p.name: s.number(p.name, p.off_value) for p in term.parameters}
+        s.finish()
+    return out
+
+
+def load_synth_spec(path) -> tuple[SynthSpec, Path, Path]:
+    """Read SYNTH.yaml; returns the spec and the marker/truth output paths (relative to the file)."""
+    path = Path(path)
+    sec = Section(path, load_yaml(path))
+    name = sec.string("name", required=True)
+    seed = sec.number("seed", 0, integer=True, nonnegative=True)
+    rate = sec.number("sample_rate_hz", 120.0, positive=True)
+    coef = _coefficients(path, sec)
+    disc, env = read_disc_env(path, sec)
+    markers = read_markers(path, sec, DEFAULT_MARKERS)
+    physics = read_physics(path, sec)
+    out = sec.section("output")
+    markers_path = path.parent / out.string("markers", f"{name}_markers.csv")
+    truth_path = path.parent / out.string("truth", f"{name}_truth.json")
+    out.finish()
+    raw_flights = sec.raw("flights", required=True)
+    if not isinstance(raw_flights, list) or not raw_flights:
+        raise ConfigError(path, "flights", "must be a non-empty list")
+    flights = []
+    for i, rf in enumerate(raw_flights):
+        f = Section(path, rf, f"flights[{i}]")
+        pitch = f.number("pitch_deg", None, minimum=-90, maximum=90)
+        alpha = f.number("alpha_deg", None, minimum=-90, maximum=90)
+        if pitch is not None and alpha is not None:
+            raise ConfigError(path, f.key("alpha_deg"), "give pitch_deg or alpha_deg, not both")
+        flights.append(LaunchSpec(
+            name=f.string("name", f"flight{i + 1}"),
+            speed=f.number("speed", required=True, positive=True),
+            launch_angle_deg=f.number("launch_angle_deg", 0.0, minimum=-90, maximum=90),
+            heading_deg=f.number("heading_deg", 0.0),
+            position=tuple(f.vector("position", 3, [0.0, 0.0, 1.0])),
+            pitch_deg=pitch, alpha_deg=alpha if pitch is None else None,
+            roll_deg=f.number("roll_deg", 0.0, minimum=-90, maximum=90),
+            spin=f.number("spin", 60.0), p=f.number("p", 0.0), q=f.number("q", 0.0),
+            duration=f.number("duration", 1.0, positive=True),
+            noise_mm=f.number("noise_mm", 2.0, nonnegative=True),
+            dropout=f.number("dropout", 0.0, minimum=0.0, maximum=0.9),
+        ))
+        f.finish()
+    names = [f.name for f in flights]
+    if len(set(names)) != len(names):
+        raise ConfigError(path, "flights", f"flight names repeat: {names}")
+    sec.finish()
+    spec = SynthSpec(name=name, flights=tuple(flights), coefficients=coef, disc=disc, env=env, markers=markers,
+                     physics=physics, sample_rate_hz=rate, seed=seed)
+    return spec, markers_path, truth_path

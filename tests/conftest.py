@@ -1,0 +1,19 @@
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = REPO.parent / "shared"
+REFERENCE_DIR = SHARED / "reference"
+
+
+@pytest.fixture(scope="session")
+def reference_dir() -> Path:
+    assert REFERENCE_DIR.is_dir(), f"SPEC §3 reference trajectories expected at {REFERENCE_DIR} (../shared/reference)"
+    return REFERENCE_DIR
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)

@@ -1,0 +1,117 @@
+"""Physics checks that can fail: conservation laws, the parabola, mirror symmetry, solve_ivp agreement,
+wild parameters."""
+import numpy as np
+import pytest
+
+from bayes_disc.physics import (Disc, Environment, SimulatorSettings, get_terms, literature_coefficients,
+                                simulate, simulate_reference)
+from bayes_disc.physics.equations import angular_momentum_world, kinetic_energy
+from bayes_disc.physics.frames import attitude_from_yaw_pitch_roll, omega_body_from_pqr, quat_to_matrix
+from bayes_disc.observation.synth import DEFAULT_MARKERS
+
+MARKERS = np.array(list(DEFAULT_MARKERS.values()))
+HUMMEL = literature_coefficients("hummel2002").as_array()
+
+
+def _state(speed=13.0, gamma=0.05, pitch=0.12, roll=0.08, pqr=(3.0, -2.0, 55.0)):
+    v = speed * np.array([np.cos(gamma), 0.0, np.sin(gamma)])
+    q = attitude_from_yaw_pitch_roll(0.1, pitch, roll)
+    return np.concatenate([[0.0, 0.0, 1.0], v, q, omega_body_from_pqr(pqr, v, q)])
+
+
+def _conservation_errors(y0, t, disc, env, settings):
+    states = simulate(y0, np.zeros(10), t, disc=disc, env=env, settings=settings).states[0]
+    energy = np.array([kinetic_energy(s, disc) + disc.mass * env.g * s[2] for s in states])
+    H = np.array([angular_momentum_world(s, disc) for s in states])
+    return np.abs(energy / energy[0] - 1).max(), np.abs(H - H[0]).max() / np.linalg.norm(H[0])
+
+
+def test_torque_free_drag_free_conserves_energy_and_angular_momentum():
+    """Total energy (kinetic + m g z) and world angular momentum are invariants without aerodynamics.
+    At the default (rated ≲1e-6 m) step they hold to 1e-6 relative; the drift is truncation error, so
+    it must shrink at least 16-fold (≥ 4th order) when the step is halved."""
+    disc, env = Disc(), Environment()
+    y0 = _state(pqr=(6.0, -4.0, 40.0))  # strong wobble
+    t = np.arange(241) / 120.0
+    coarse = SimulatorSettings()
+    fine = SimulatorSettings(method=coarse.method, step_factor=coarse.c / 2)
+    e1, h1 = _conservation_errors(y0, t, disc, env, coarse)
+    e2, h2 = _conservation_errors(y0, t, disc, env, fine)
+    assert e1 < 1e-6 and h1 < 1e-6
+    assert e2 < e1 / 16 and h2 < h1 / 16
+    # the test can fail: with aerodynamics on, energy is not conserved
+    tr_aero = simulate(y0, HUMMEL, t, disc=disc, env=env)
+    e_aero = kinetic_energy(tr_aero.states[0, -1], disc) + disc.mass * env.g * tr_aero.states[0, -1, 2]
+    e0 = kinetic_energy(y0, disc) + disc.mass * env.g * y0[2]
+    assert abs(e_aero / e0 - 1) > 1e-3
+
+
+def test_gravity_only_gives_exact_parabola():
+    env = Environment()
+    y0 = _state()
+    t = np.linspace(0, 2.0, 97)
+    tr = simulate(y0, np.zeros(10), t, env=env)
+    expect = y0[:3] + np.outer(t, y0[3:6]) - 0.5 * env.g * np.outer(t**2, [0, 0, 1])
+    assert np.abs(tr.states[0, :, :3] - expect).max() < 1e-10
+
+
+def test_mirrored_throw_gives_mirrored_path():
+    """Reflect y → −y: positions and velocities mirror, ω (axial) becomes −Mω, the attitude M R M and the
+    markers M m_B; with the same coefficients (roll terms included) every marker path mirrors."""
+    M = np.diag([1.0, -1.0, 1.0])
+    y0 = _state(pqr=(2.0, -1.5, 60.0))
+    R = quat_to_matrix(y0[6:10])
+    from bayes_disc.physics.frames import matrix_to_quat
+    y_m = np.concatenate([M @ y0[:3], M @ y0[3:6], matrix_to_quat(M @ R @ M), -(M @ y0[10:13])])
+    t = np.arange(181) / 120.0
+    a = simulate(y0, HUMMEL, t, marker_body=MARKERS)
+    b = simulate(y_m, HUMMEL, t, marker_body=MARKERS @ M)
+    mirrored = a.markers[0] @ M
+    assert np.abs(b.markers[0] - mirrored).max() < 1e-9
+    # sanity: the throw does curve sideways, so the mirror test has something to check
+    assert np.abs(a.states[0, -1, 1]) > 0.05
+
+
+@pytest.mark.parametrize("terms", [(), ("side_force", "wind")])
+def test_kernel_agrees_with_solve_ivp_dop853(terms):
+    y0 = _state(pqr=(4.0, -3.0, 50.0))
+    t = np.arange(0, 181) / 120.0 + 0.3
+    terms = get_terms(terms)
+    ext = np.array([0.3, 1.5, -2.0, 0.3])[: sum(len(x.parameters) for x in terms)]
+    fast = simulate(y0, HUMMEL, t, t0=0.3, marker_body=MARKERS, terms=terms, extension=ext if ext.size else None)
+    ref = simulate_reference(y0, HUMMEL, t, t0=0.3, marker_body=MARKERS, terms=terms,
+                             extension=ext if ext.size else None)
+    assert np.abs(fast.markers - ref.markers).max() < 1e-6
+
+
+def test_terms_change_the_flight():
+    y0 = _state()
+    t = np.arange(121) / 120.0
+    base = simulate(y0, HUMMEL, t)
+    side = simulate(y0, HUMMEL, t, terms=get_terms(["side_force"]), extension=[0.5])
+    off = simulate(y0, HUMMEL, t, terms=get_terms(["side_force"]), extension=[0.0])
+    assert np.abs(off.states - base.states).max() < 1e-12
+    # positive spin (r > 0) pushes to the right: −y in the world frame
+    assert side.states[0, -1, 1] < base.states[0, -1, 1] - 0.01
+
+
+def test_wild_parameters_return_flags_not_nan():
+    t = np.arange(241) / 120.0
+    good = _state()
+    lanes = np.tile(good, (6, 1))
+    coef = np.tile(HUMMEL, (6, 1))
+    coef[1] *= 1e6                       # absurd coefficients
+    lanes[2, 10:13] = [1e5, 0, 1e5]      # tumbling far beyond any throw
+    lanes[3, 3:6] = 0.0                  # dropped from rest: falls, stalls
+    coef[4, 0] = np.nan                  # NaN parameter
+    lanes[5, 3:6] = [1e-9, 0, 0]         # speed → 0
+    tr = simulate(lanes, coef, t, marker_body=MARKERS)
+    assert tr.status[0] == 0
+    assert tr.status[1] != 0 and tr.status[2] != 0 and tr.status[4] != 0
+    for b in range(6):
+        if tr.status[b] == 0:
+            assert np.all(np.isfinite(tr.markers[b])), f"lane {b} ok but not finite"
+        else:
+            assert np.all(np.isnan(tr.markers[b])), f"lane {b} failed but not NaN"
+    solo = simulate(good, HUMMEL, t, marker_body=MARKERS)
+    assert np.abs(solo.markers[0] - tr.markers[0]).max() < 1e-7
