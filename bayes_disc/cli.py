@@ -36,6 +36,14 @@ def _cmd_synth(args) -> int:
     return 0
 
 
+def _cmd_sample(args) -> int:
+    from .inference.config import load_config
+    from .inference.run import run_sample
+    cfg = load_config(args.config, output_override=args.output)
+    summary = run_sample(cfg, resume=args.resume, progress=not args.no_progress)
+    return 0 if summary["convergence"]["converged"] or not args.strict else 3
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="bayes-disc", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"bayes-disc {__version__}")
@@ -47,6 +55,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("synth", help="make synthetic flights from a SYNTH.yaml description")
     p.add_argument("config", help="SYNTH.yaml")
     p.set_defaults(func=_cmd_synth)
+    p = sub.add_parser("sample", help="least squares + emcee posterior over coefficients and initial conditions")
+    p.add_argument("config", help="CONFIG.yaml (SPEC §5)")
+    p.add_argument("--resume", action="store_true", help="continue an interrupted run from its chain files")
+    p.add_argument("--output", help="override the config's output folder")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--strict", action="store_true", help="exit 3 if the cap is reached before convergence")
+    p.set_defaults(func=_cmd_sample)
     _register_optional(sub)
     return parser
 

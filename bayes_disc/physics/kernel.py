@@ -244,10 +244,14 @@ def _make_kernel(terms: tuple[Term, ...]):
 
     @nb.njit(error_model="numpy")
     def integrate(y0, coef, ext, k, t0, times, marker_body, A_rk, b_rk, c_rk, step_factor,
-                  omega_cap, speed_cap, out_states, out_markers, status):
+                  omega_cap, speed_cap, fixed_rate, rate_margin, out_states, out_markers, status):
         """Integrate lanes y0 (B,13) with coefficients (B,10) and term parameters ext (B,ne) from t0 to
         every time in ``times`` (non-decreasing, ≥ t0). Writes out_states (B,n,13) when it has n rows,
-        out_markers (B,n,nm,3) when it has n rows, and status (B,)."""
+        out_markers (B,n,nm,3) when it has n rows, and status (B,).
+
+        fixed_rate > 0 fixes the step schedule (h = c / fixed_rate) so results are smooth functions of
+        the parameters (finite-difference Jacobians, MCMC); lanes whose own rate exceeds
+        rate_margin · fixed_rate are then flagged instead of shortening everyone's step."""
         B = y0.shape[0]
         n = times.shape[0]
         ns = b_rk.shape[0]
@@ -280,10 +284,13 @@ def _make_kernel(terms: tuple[Term, ...]):
                     for b in range(nl):
                         if status[start + b] == STATUS_OK:
                             rate = lane_rate(S, C, k, b)
-                            if not (rate <= omega_cap):
+                            cap = rate_margin * fixed_rate if fixed_rate > 0.0 else omega_cap
+                            if not (rate <= cap):
                                 status[start + b] = STATUS_RATE
                             elif rate > wmax:
                                 wmax = rate
+                    if fixed_rate > 0.0:
+                        wmax = fixed_rate
                     for b in range(nl):
                         if status[start + b] != STATUS_OK:
                             for j in range(13):

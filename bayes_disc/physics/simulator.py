@@ -23,13 +23,17 @@ class SimulatorSettings:
 
     method: Runge–Kutta tableau (``rk6`` Butcher 7-stage 6th order, or ``rk4``); step_factor c: the
     substep is h ≤ c/ω_c (see :mod:`.kernel`), None for the method's default; omega_cap [rad/s]: lanes
-    faster than this are flagged; speed_cap [m/s]: lanes faster than this are flagged.
+    faster than this are flagged; speed_cap [m/s]: lanes faster than this are flagged; fixed_rate
+    [rad/s]: if set, every substep is h = c / fixed_rate (a parameter-independent schedule, so results
+    are smooth in the parameters) and lanes whose own rate exceeds rate_margin · fixed_rate are flagged.
     """
 
     method: str = "rk6"
     step_factor: float | None = None
     omega_cap: float = 5000.0
     speed_cap: float = 300.0
+    fixed_rate: float | None = None
+    rate_margin: float = 2.0
 
     def __post_init__(self):
         if self.method not in TABLEAUX:
@@ -111,7 +115,8 @@ def simulate(initial_states, coefficients, times, *, t0: float | None = None, di
     A, b, c = TABLEAUX[settings.method]
     kernel = get_kernel(tuple(terms))
     kernel(y0, coef, ext, _constants(disc, env), t0, times, mb, A, b, c, settings.c,
-           settings.omega_cap, settings.speed_cap, out_states, out_markers, status)
+           settings.omega_cap, settings.speed_cap, settings.fixed_rate or 0.0, settings.rate_margin,
+           out_states, out_markers, status)
     failed = status != STATUS_OK
     out_states[failed] = np.nan   # a failed lane is NaN over its whole trajectory
     out_markers[failed] = np.nan

@@ -1,0 +1,158 @@
+"""Run configuration (SPEC §5 subset plus bayes-disc's own keys), validated up front.
+
+Keys beyond SPEC §5 (all optional):
+
+```yaml
+sampler:                 # emcee settings
+  ensembles: 4           # independent ensembles; R-hat is computed across them
+  walkers: 0             # per ensemble; 0 = the smallest even number ≥ 2·dim
+  max_steps: 3000        # cap per ensemble
+  check_every: 50        # steps between convergence checks
+  min_steps: 400
+  n_tau: 50              # stop when every chain is ≥ n_tau · τ long ...
+  rhat: 1.01             # ... R-hat across ensembles is below this ...
+  ess: 400               # ... and every coefficient's bulk ESS reaches this
+  independence_fraction: 0.7   # share of the independence move (rest: DE moves)
+  adapt_steps: 150       # warm-up: the independence proposal is re-fitted after 150 and 300 steps
+  seed: 1
+  processes: 2           # ensembles run in parallel processes
+least_squares: {starts: 4, max_nfev: 200}
+simulator: {method: rk6, step_factor: null}
+physics: {side_force: {CY: 0.0}}        # extra terms in the model; values are starting guesses
+flight_options:                          # per flight, by name
+  fffl10: {t_start: 0.0, t_end: 0.8}     # time window [s]
+truth: truth.json                        # optional truth file (synthetic data) for reports
+```
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..observation.config_io import ConfigError, Section, load_yaml
+from ..observation.synth import read_disc_env, read_markers, read_physics
+from ..physics import Disc, Environment
+
+PRIORS = ("potts_crowther", "weak")
+
+
+@dataclass(frozen=True)
+class SamplerSettings:
+    ensembles: int = 4
+    walkers: int = 0
+    max_steps: int = 3000
+    check_every: int = 50
+    min_steps: int = 400
+    n_tau: float = 50.0
+    rhat: float = 1.01
+    ess: float = 400.0
+    independence_fraction: float = 0.7
+    adapt_steps: int = 150
+    seed: int = 1
+    processes: int = 2
+
+
+@dataclass(frozen=True)
+class LeastSquaresSettings:
+    starts: int = 4
+    max_nfev: int = 200
+
+
+@dataclass(frozen=True)
+class FlightOption:
+    t_start: float | None = None
+    t_end: float | None = None
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    path: Path
+    name: str
+    files: tuple[Path, ...]
+    markers: dict
+    disc: Disc = Disc()
+    env: Environment = Environment()
+    prior: str = "potts_crowther"
+    output: Path = Path("runs/run")
+    sampler: SamplerSettings = SamplerSettings()
+    least_squares: LeastSquaresSettings = LeastSquaresSettings()
+    simulator_method: str = "rk6"
+    simulator_step_factor: float | None = None
+    physics: dict = field(default_factory=dict)
+    flight_options: dict = field(default_factory=dict)
+    truth: Path | None = None
+
+    @property
+    def marker_ids(self) -> tuple[str, ...]:
+        return tuple(self.markers)
+
+
+def load_config(path, output_override=None) -> RunConfig:
+    """Read and validate CONFIG.yaml; every problem raises :class:`ConfigError` naming the key or file."""
+    path = Path(path)
+    sec = Section(path, load_yaml(path))
+    name = sec.string("name", required=True)
+    if any(c in name for c in "/\\") or name.startswith("."):
+        raise ConfigError(path, "name", f"must be a plain run name, got {name!r}")
+    raw_flights = sec.raw("flights", required=True)
+    if not isinstance(raw_flights, list) or not raw_flights:
+        raise ConfigError(path, "flights", "must be a non-empty list of {file: ...}")
+    files = []
+    for i, rf in enumerate(raw_flights):
+        f = Section(path, rf, f"flights[{i}]")
+        file = path.parent / f.string("file", required=True)
+        f.finish()
+        if not file.is_file():
+            raise ConfigError(path, f"flights[{i}].file", f"file not found: {file}")
+        files.append(file)
+    markers = read_markers(path, sec)
+    disc, env = read_disc_env(path, sec)
+    prior = sec.string("prior", "potts_crowther", choices=PRIORS)
+    out = sec.string("output", None)
+    output = (path.parent / out) if out else Path.cwd() / "runs" / name
+    if output_override is not None:
+        output = Path(output_override)
+    s = sec.section("sampler")
+    sampler = SamplerSettings(
+        ensembles=s.number("ensembles", 4, integer=True, minimum=2),
+        walkers=s.number("walkers", 0, integer=True, nonnegative=True),
+        max_steps=s.number("max_steps", 3000, integer=True, minimum=10),
+        check_every=s.number("check_every", 50, integer=True, minimum=5),
+        min_steps=s.number("min_steps", 400, integer=True, minimum=5),
+        n_tau=s.number("n_tau", 50.0, positive=True),
+        rhat=s.number("rhat", 1.01, minimum=1.0),
+        ess=s.number("ess", 400.0, positive=True),
+        independence_fraction=s.number("independence_fraction", 0.7, minimum=0.0, maximum=1.0),
+        adapt_steps=s.number("adapt_steps", 150, integer=True, minimum=20),
+        seed=s.number("seed", 1, integer=True, nonnegative=True),
+        processes=s.number("processes", 2, integer=True, minimum=1),
+    )
+    s.finish()
+    ls = sec.section("least_squares")
+    least = LeastSquaresSettings(starts=ls.number("starts", 4, integer=True, minimum=1),
+                                 max_nfev=ls.number("max_nfev", 200, integer=True, minimum=5))
+    ls.finish()
+    sim = sec.section("simulator")
+    method = sim.string("method", "rk6", choices=("rk6", "rk4"))
+    step = sim.number("step_factor", None, positive=True)
+    sim.finish()
+    physics = read_physics(path, sec)
+    fo_raw = sec.raw("flight_options", {}) or {}
+    if not isinstance(fo_raw, dict):
+        raise ConfigError(path, "flight_options", "must map flight names to options")
+    flight_options = {}
+    for fname, opts in fo_raw.items():
+        o = Section(path, opts, f"flight_options.{fname}")
+        fo = FlightOption(t_start=o.number("t_start", None), t_end=o.number("t_end", None))
+        o.finish()
+        if fo.t_start is not None and fo.t_end is not None and fo.t_end <= fo.t_start:
+            raise ConfigError(path, f"flight_options.{fname}.t_end", "must be after t_start")
+        flight_options[str(fname)] = fo
+    truth = sec.string("truth", None)
+    truth_path = path.parent / truth if truth else None
+    if truth_path is not None and not truth_path.is_file():
+        raise ConfigError(path, "truth", f"file not found: {truth_path}")
+    sec.finish()
+    return RunConfig(path=path, name=name, files=tuple(files), markers=markers, disc=disc, env=env, prior=prior,
+                     output=output, sampler=sampler, least_squares=least, simulator_method=method,
+                     simulator_step_factor=step, physics=physics, flight_options=flight_options, truth=truth_path)

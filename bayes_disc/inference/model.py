@@ -1,0 +1,166 @@
+"""The statistical model: parameter vector, priors, simulated markers and the log-posterior.
+
+θ = [10 coefficients, extra-term parameters, per flight: position (3) m, velocity (3) m/s, attitude
+rotation vector (3) rad, body angular velocity (3) rad/s, then per flight log σ (m)].
+The attitude is q = q_ref ⊗ exp(ϑ) with q_ref the data-derived start: no singularity near the data.
+Likelihood: independent Gaussian marker coordinates with one noise scale σ_f per flight.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..observation.markers import FlightObservation
+from ..physics import COEFFICIENT_NAMES, Disc, Environment, SimulatorSettings, Term, simulate
+from ..physics.frames import quat_from_rotvec, quat_multiply
+from .priors import IC_SD, LOG_SIGMA_BOUNDS, coefficient_prior
+
+IC_NAMES = ("x", "y", "z", "vx", "vy", "vz", "th1", "th2", "th3", "wx", "wy", "wz")
+IC_UNITS = ("m", "m", "m", "m/s", "m/s", "m/s", "rad", "rad", "rad", "rad/s", "rad/s", "rad/s")
+LOG_2PI = np.log(2 * np.pi)
+
+
+@dataclass
+class Problem:
+    """Everything the log-posterior needs; built once per run."""
+
+    flights: list[FlightObservation]
+    marker_body: np.ndarray
+    disc: Disc
+    env: Environment
+    prior_name: str
+    terms: tuple[Term, ...] = ()
+    term_start: np.ndarray | None = None          # starting values of the extra-term parameters
+    start_states: list[np.ndarray] = field(default_factory=list)  # data-derived (13,) per flight
+    settings: SimulatorSettings = SimulatorSettings()
+    rates: list[float] = field(default_factory=list)  # fixed integration rate per flight [rad/s]
+
+    def __post_init__(self):
+        self.n_coef = len(COEFFICIENT_NAMES)
+        self.n_ext = sum(len(t.parameters) for t in self.terms)
+        self.n_flights = len(self.flights)
+        self.ic_start = self.n_coef + self.n_ext
+        self.sigma_start = self.ic_start + 12 * self.n_flights
+        self.dim = self.sigma_start + self.n_flights
+        self.q_ref = [s[6:10] / np.linalg.norm(s[6:10]) for s in self.start_states]
+        self._masks = [f.observed for f in self.flights]
+        self._obs = [f.positions[f.observed] for f in self.flights]
+        self.n_coords = np.array([3 * m.sum() for m in self._masks])
+        mean, sd = self._prior_arrays()
+        self.prior_mean, self.prior_sd = mean, sd
+
+    # -- names ------------------------------------------------------------------------------------------
+    @property
+    def ext_names(self) -> list[str]:
+        return [p.name for t in self.terms for p in t.parameters]
+
+    @property
+    def names(self) -> list[str]:
+        out = list(COEFFICIENT_NAMES) + self.ext_names
+        for f in self.flights:
+            out += [f"{n}_{f.name}" for n in IC_NAMES]
+        out += [f"log_sigma_{f.name}" for f in self.flights]
+        return out
+
+    def ic_slice(self, k: int) -> slice:
+        return slice(self.ic_start + 12 * k, self.ic_start + 12 * (k + 1))
+
+    def flight_columns(self, k: int) -> np.ndarray:
+        """Indices of θ that flight k's markers depend on (coefficients, extra terms, its own ICs)."""
+        return np.r_[np.arange(self.ic_start), np.arange(self.ic_start + 12 * k, self.ic_start + 12 * (k + 1))]
+
+    # -- priors -----------------------------------------------------------------------------------------
+    def _prior_arrays(self):
+        cp = coefficient_prior(self.prior_name)
+        mean = np.zeros(self.sigma_start)
+        sd = np.zeros(self.sigma_start)
+        for i, n in enumerate(COEFFICIENT_NAMES):
+            mean[i], sd[i] = cp.mean[n], cp.sd[n]
+        j = self.n_coef
+        for t in self.terms:
+            for p in t.parameters:
+                mean[j], sd[j] = p.off_value, p.prior_sd
+                j += 1
+        ic_sd = np.repeat([IC_SD["position"], IC_SD["velocity"], IC_SD["attitude"], IC_SD["omega"]], 3)
+        for k in range(self.n_flights):
+            mean[self.ic_slice(k)] = self.state_to_ic(self.start_states[k], k)
+            sd[self.ic_slice(k)] = ic_sd
+        return mean, sd
+
+    def log_prior(self, theta: np.ndarray) -> np.ndarray:
+        theta = np.atleast_2d(theta)
+        z = (theta[:, : self.sigma_start] - self.prior_mean) / self.prior_sd
+        lp = -0.5 * np.sum(z * z, axis=1)
+        ls = theta[:, self.sigma_start:]
+        inside = np.all((ls > LOG_SIGMA_BOUNDS[0]) & (ls < LOG_SIGMA_BOUNDS[1]), axis=1)
+        return np.where(inside, lp, -np.inf)
+
+    def sample_prior(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        out = np.empty((n, self.dim))
+        out[:, : self.sigma_start] = self.prior_mean + self.prior_sd * rng.standard_normal((n, self.sigma_start))
+        out[:, self.sigma_start:] = rng.uniform(*LOG_SIGMA_BOUNDS, size=(n, self.n_flights))
+        return out
+
+    # -- states -----------------------------------------------------------------------------------------
+    def ic_to_state(self, ic: np.ndarray, k: int) -> np.ndarray:
+        """(B, 12) initial-condition parameters of flight k → (B, 13) states."""
+        ic = np.atleast_2d(ic)
+        q = quat_multiply(self.q_ref[k], quat_from_rotvec(ic[:, 6:9]))
+        return np.concatenate([ic[:, :6], q, ic[:, 9:12]], axis=1)
+
+    def state_to_ic(self, state: np.ndarray, k: int) -> np.ndarray:
+        from ..physics.frames import quat_to_rotvec
+        qr = self.q_ref[k] * np.array([1, -1, -1, -1])
+        rel = quat_multiply(qr, state[6:10])
+        return np.concatenate([state[:6], quat_to_rotvec(rel), state[10:13]])
+
+    # -- model ------------------------------------------------------------------------------------------
+    def predict(self, theta: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Markers (B, n, n_markers, 3) of flight k for θ (B, dim), and ok flags (B,)."""
+        theta = np.atleast_2d(theta)
+        f = self.flights[k]
+        states = self.ic_to_state(theta[:, self.ic_slice(k)], k)
+        ext = theta[:, self.n_coef: self.ic_start] if self.n_ext else None
+        settings = self.settings
+        if self.rates:
+            settings = SimulatorSettings(method=settings.method, step_factor=settings.step_factor,
+                                         omega_cap=settings.omega_cap, speed_cap=settings.speed_cap,
+                                         fixed_rate=self.rates[k])
+        tr = simulate(states, theta[:, : self.n_coef], f.times, t0=f.times[0], disc=self.disc, env=self.env,
+                      marker_body=self.marker_body, terms=self.terms, extension=ext, settings=settings,
+                      want_states=False)
+        return tr.markers, tr.ok
+
+    def residuals(self, theta: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Observed-point residuals (B, n_coords_k) [m] (predicted − measured) and ok flags."""
+        markers, ok = self.predict(theta, k)
+        r = markers[:, self._masks[k]] - self._obs[k][None]
+        return r.reshape(r.shape[0], -1), ok
+
+    def log_likelihood(self, theta: np.ndarray) -> np.ndarray:
+        theta = np.atleast_2d(theta)
+        total = np.zeros(theta.shape[0])
+        for k in range(self.n_flights):
+            r, ok = self.residuals(theta, k)
+            log_sigma = theta[:, self.sigma_start + k]
+            ss = np.sum(r * r, axis=1)
+            n = self.n_coords[k]
+            ll = -0.5 * ss * np.exp(-2 * log_sigma) - n * log_sigma - 0.5 * n * LOG_2PI
+            total += np.where(ok & np.isfinite(ss), ll, -np.inf)
+        return total
+
+    def log_prob(self, theta: np.ndarray) -> np.ndarray:
+        """Vectorised log-posterior for emcee (θ: (B, dim) → (B,))."""
+        theta = np.atleast_2d(theta)
+        lp = self.log_prior(theta)
+        out = np.full(theta.shape[0], -np.inf)
+        good = np.isfinite(lp)
+        if good.any():
+            out[good] = lp[good] + self.log_likelihood(theta[good])
+        return out
+
+    def flight_rate(self, state: np.ndarray) -> float:
+        """Integration rate for a flight: 1.25 × the fastest rate of its start (spin, nutation, aero)."""
+        w = state[10:13]
+        return 1.25 * max(np.linalg.norm(w), self.disc.Ia / self.disc.Id * abs(w[2]), 30.0)
