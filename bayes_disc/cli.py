@@ -67,22 +67,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _register_optional(sub) -> None:
-    """Subcommands of front ends that live in their own packages."""
-    try:
-        from .video.cli import register as register_video
-    except ImportError:
-        return
+    """Subcommands that live in their own packages (report, video front end)."""
+    from .report.cli import register as register_report
+    from .video.cli import register as register_video
+    register_report(sub)
     register_video(sub)
 
 
 def _input_errors() -> tuple[type[Exception], ...]:
-    errors = INPUT_ERRORS
-    try:
-        from .video.errors import VideoInputError
-        errors = errors + (VideoInputError,)
-    except ImportError:
-        pass
-    return errors
+    from .report.errors import ReportInputError
+    from .video.errors import VideoInputError
+    return INPUT_ERRORS + (ReportInputError, VideoInputError)
 
 
 def main(argv=None) -> int:

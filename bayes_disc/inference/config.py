@@ -9,7 +9,7 @@ sampler:                 # emcee settings
   max_steps: 3000        # cap per ensemble
   check_every: 50        # steps between convergence checks
   min_steps: 400
-  n_tau: 50              # stop when every chain is ≥ n_tau · τ long ...
+  n_tau: 10              # stop when every chain is ≥ n_tau · τ long (τ: emcee's estimator) ...
   rhat: 1.01             # ... R-hat across ensembles is below this ...
   ess: 400               # ... and every coefficient's bulk ESS reaches this
   independence_fraction: 0.7   # share of the independence move (rest: DE moves)
@@ -17,7 +17,7 @@ sampler:                 # emcee settings
   seed: 1
   processes: 2           # ensembles run in parallel processes
 least_squares: {starts: 4, max_nfev: 200}
-simulator: {method: rk6, step_factor: null}
+simulator: {method: vern7, step_factor: null}   # Runge–Kutta tableau and step factor (kernel defaults)
 physics: {side_force: {CY: 0.0}}        # extra terms in the model; values are starting guesses
 flight_options:                          # per flight, by name
   fffl10: {t_start: 0.0, t_end: 0.8}     # time window [s]
@@ -32,6 +32,7 @@ from pathlib import Path
 from ..observation.config_io import ConfigError, Section, load_yaml
 from ..observation.synth import read_disc_env, read_markers, read_physics
 from ..physics import Disc, Environment
+from ..physics.kernel import DEFAULT_METHOD, TABLEAUX
 
 PRIORS = ("potts_crowther", "weak")
 
@@ -43,7 +44,7 @@ class SamplerSettings:
     max_steps: int = 3000
     check_every: int = 50
     min_steps: int = 400
-    n_tau: float = 50.0
+    n_tau: float = 10.0
     rhat: float = 1.01
     ess: float = 400.0
     independence_fraction: float = 0.7
@@ -76,7 +77,7 @@ class RunConfig:
     output: Path = Path("runs/run")
     sampler: SamplerSettings = SamplerSettings()
     least_squares: LeastSquaresSettings = LeastSquaresSettings()
-    simulator_method: str = "rk6"
+    simulator_method: str = DEFAULT_METHOD
     simulator_step_factor: float | None = None
     physics: dict = field(default_factory=dict)
     flight_options: dict = field(default_factory=dict)
@@ -119,11 +120,11 @@ def load_config(path, output_override=None) -> RunConfig:
         max_steps=s.number("max_steps", 3000, integer=True, minimum=10),
         check_every=s.number("check_every", 50, integer=True, minimum=5),
         min_steps=s.number("min_steps", 400, integer=True, minimum=5),
-        n_tau=s.number("n_tau", 50.0, positive=True),
+        n_tau=s.number("n_tau", 10.0, positive=True),
         rhat=s.number("rhat", 1.01, minimum=1.0),
         ess=s.number("ess", 400.0, positive=True),
         independence_fraction=s.number("independence_fraction", 0.7, minimum=0.0, maximum=1.0),
-        adapt_steps=s.number("adapt_steps", 150, integer=True, minimum=20),
+        adapt_steps=s.number("adapt_steps", 150, integer=True, minimum=10),
         seed=s.number("seed", 1, integer=True, nonnegative=True),
         processes=s.number("processes", 2, integer=True, minimum=1),
     )
@@ -133,7 +134,7 @@ def load_config(path, output_override=None) -> RunConfig:
                                  max_nfev=ls.number("max_nfev", 200, integer=True, minimum=5))
     ls.finish()
     sim = sec.section("simulator")
-    method = sim.string("method", "rk6", choices=("rk6", "rk4"))
+    method = sim.string("method", DEFAULT_METHOD, choices=tuple(TABLEAUX))
     step = sim.number("step_factor", None, positive=True)
     sim.finish()
     physics = read_physics(path, sec)

@@ -15,27 +15,25 @@ FAILED_RESIDUAL = 1e3  # whitened residual standing in for a failed simulation
 
 @dataclass
 class LeastSquaresResult:
-    theta: np.ndarray            # (dim,) optimum including log σ per flight
+    theta: np.ndarray            # (dim,) optimum
+    sigma: np.ndarray            # (n_flights,) noise scale per flight [m]: residual RMS at the optimum
     cov: np.ndarray              # (dim, dim) Gauss–Newton covariance (prior included)
     cost: float                  # ½ Σ whitened residual² at the optimum
-    rms_m: np.ndarray            # marker RMS per flight [m]
     condition_number: float      # of the scale-free (correlation-normalised) information matrix
     start_costs: list            # final cost of every start
     nfev: int
     message: str
     names: list
+    flight_names: list
 
     def to_dict(self) -> dict:
         sd = np.sqrt(np.diag(self.cov))
         return {
             "cost": self.cost, "condition_number": self.condition_number, "nfev": self.nfev,
             "message": self.message, "start_costs": self.start_costs,
-            "rms_mm": {n: float(r * 1e3) for n, r in zip(self._flight_names(), self.rms_m)},
+            "rms_mm": {n: float(r * 1e3) for n, r in zip(self.flight_names, self.sigma)},
             "parameters": {n: {"value": float(v), "sd": float(s)} for n, v, s in zip(self.names, self.theta, sd)},
         }
-
-    def _flight_names(self):
-        return [n[len("log_sigma_"):] for n in self.names if n.startswith("log_sigma_")]
 
 
 def _steps(problem: Problem, x: np.ndarray) -> np.ndarray:
@@ -45,7 +43,7 @@ def _steps(problem: Problem, x: np.ndarray) -> np.ndarray:
 
 def _whitened(x: np.ndarray, problem: Problem, sigma: np.ndarray) -> np.ndarray:
     parts = []
-    theta = np.concatenate([x, np.log(sigma)])[None]
+    theta = x[None]
     for k in range(problem.n_flights):
         r, ok = problem.residuals(theta, k)
         r = r[0] / sigma[k]
@@ -63,7 +61,7 @@ def _jacobian(x: np.ndarray, problem: Problem, sigma: np.ndarray) -> np.ndarray:
     n_x = x.size
     for k in range(problem.n_flights):
         cols = problem.flight_columns(k)
-        lanes = np.repeat(np.concatenate([x, np.log(sigma)])[None], 2 * cols.size, axis=0)
+        lanes = np.repeat(x[None], 2 * cols.size, axis=0)
         lanes[np.arange(cols.size), cols] += h[cols]
         lanes[cols.size + np.arange(cols.size), cols] -= h[cols]
         r, ok = problem.residuals(lanes, k)
@@ -115,26 +113,20 @@ def fit_least_squares(problem: Problem, starts: int = 4, max_nfev: int = 200, se
     sigma = _rms(problem, x)
     J = _jacobian(x, problem, sigma)
     F = J.T @ J
-    cov_x = np.linalg.pinv(F)
-    dim = problem.dim
-    cov = np.zeros((dim, dim))
-    cov[: x.size, : x.size] = cov_x
-    for k in range(problem.n_flights):
-        j = problem.sigma_start + k
-        cov[j, j] = 1.0 / (2.0 * problem.n_coords[k])  # Var(log σ̂) for n Gaussian coordinates
     d = np.sqrt(np.diag(F))
+    cov = np.linalg.pinv(F / np.outer(d, d)) / np.outer(d, d)   # scaled: entries span ~12 decades
     Fn = F / np.outer(d, d)
     ev = np.linalg.eigvalsh(Fn)
-    theta = np.concatenate([x, np.log(sigma)])
-    return LeastSquaresResult(theta=theta, cov=cov, cost=float(res.cost), rms_m=sigma,
+    return LeastSquaresResult(theta=x, sigma=sigma, cov=cov, cost=float(res.cost),
                               condition_number=float(ev[-1] / max(ev[0], 1e-300)),
                               start_costs=[float(r.cost) for r in results], nfev=int(nfev),
-                              message=str(res.message), names=problem.names)
+                              message=str(res.message), names=problem.names,
+                              flight_names=[f.name for f in problem.flights])
 
 
 def _rms(problem: Problem, x: np.ndarray) -> np.ndarray:
     out = np.empty(problem.n_flights)
-    theta = np.concatenate([x, np.zeros(problem.n_flights)])[None]
+    theta = x[None]
     for k in range(problem.n_flights):
         r, ok = problem.residuals(theta, k)
         out[k] = np.sqrt(np.mean(r[0] ** 2)) if ok[0] else 1e-2

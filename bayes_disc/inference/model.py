@@ -1,9 +1,17 @@
 """The statistical model: parameter vector, priors, simulated markers and the log-posterior.
 
 θ = [10 coefficients, extra-term parameters, per flight: position (3) m, velocity (3) m/s, attitude
-rotation vector (3) rad, body angular velocity (3) rad/s, then per flight log σ (m)].
+rotation vector (3) rad, body angular velocity (3) rad/s].
 The attitude is q = q_ref ⊗ exp(ϑ) with q_ref the data-derived start: no singularity near the data.
-Likelihood: independent Gaussian marker coordinates with one noise scale σ_f per flight.
+
+Likelihood: independent Gaussian marker coordinates with one noise scale σ_f per flight, prior
+p(σ_f) ∝ 1/σ_f (Jeffreys). σ_f is integrated out analytically,
+
+    p(y_f | θ) = ∫ N(y_f | m_f(θ), σ_f² I) dσ_f/σ_f = ½ Γ(n_f/2) (π S_f)^(−n_f/2),   S_f = Σ residual²,
+
+so the sampler explores θ alone (σ and θ are coupled: in ~60 dimensions that coupling alone makes the
+joint posterior far from Gaussian), and σ_f is then drawn exactly from its conditional
+σ_f² | θ, y ~ S_f / χ²_{n_f}: together an exact sample of the joint posterior p(θ, σ | y).
 """
 from __future__ import annotations
 
@@ -14,11 +22,12 @@ import numpy as np
 from ..observation.markers import FlightObservation
 from ..physics import COEFFICIENT_NAMES, Disc, Environment, SimulatorSettings, Term, simulate
 from ..physics.frames import quat_from_rotvec, quat_multiply
-from .priors import IC_SD, LOG_SIGMA_BOUNDS, coefficient_prior
+from scipy.special import gammaln
+
+from .priors import IC_SD, coefficient_prior
 
 IC_NAMES = ("x", "y", "z", "vx", "vy", "vz", "th1", "th2", "th3", "wx", "wy", "wz")
 IC_UNITS = ("m", "m", "m", "m/s", "m/s", "m/s", "rad", "rad", "rad", "rad/s", "rad/s", "rad/s")
-LOG_2PI = np.log(2 * np.pi)
 
 
 @dataclass
@@ -41,8 +50,7 @@ class Problem:
         self.n_ext = sum(len(t.parameters) for t in self.terms)
         self.n_flights = len(self.flights)
         self.ic_start = self.n_coef + self.n_ext
-        self.sigma_start = self.ic_start + 12 * self.n_flights
-        self.dim = self.sigma_start + self.n_flights
+        self.dim = self.ic_start + 12 * self.n_flights
         self.q_ref = [s[6:10] / np.linalg.norm(s[6:10]) for s in self.start_states]
         self._masks = [f.observed for f in self.flights]
         self._obs = [f.positions[f.observed] for f in self.flights]
@@ -60,8 +68,11 @@ class Problem:
         out = list(COEFFICIENT_NAMES) + self.ext_names
         for f in self.flights:
             out += [f"{n}_{f.name}" for n in IC_NAMES]
-        out += [f"log_sigma_{f.name}" for f in self.flights]
         return out
+
+    @property
+    def sigma_names(self) -> list[str]:
+        return [f"sigma_{f.name}" for f in self.flights]
 
     def ic_slice(self, k: int) -> slice:
         return slice(self.ic_start + 12 * k, self.ic_start + 12 * (k + 1))
@@ -73,8 +84,8 @@ class Problem:
     # -- priors -----------------------------------------------------------------------------------------
     def _prior_arrays(self):
         cp = coefficient_prior(self.prior_name)
-        mean = np.zeros(self.sigma_start)
-        sd = np.zeros(self.sigma_start)
+        mean = np.zeros(self.dim)
+        sd = np.zeros(self.dim)
         for i, n in enumerate(COEFFICIENT_NAMES):
             mean[i], sd[i] = cp.mean[n], cp.sd[n]
         j = self.n_coef
@@ -90,17 +101,11 @@ class Problem:
 
     def log_prior(self, theta: np.ndarray) -> np.ndarray:
         theta = np.atleast_2d(theta)
-        z = (theta[:, : self.sigma_start] - self.prior_mean) / self.prior_sd
-        lp = -0.5 * np.sum(z * z, axis=1)
-        ls = theta[:, self.sigma_start:]
-        inside = np.all((ls > LOG_SIGMA_BOUNDS[0]) & (ls < LOG_SIGMA_BOUNDS[1]), axis=1)
-        return np.where(inside, lp, -np.inf)
+        z = (theta - self.prior_mean) / self.prior_sd
+        return -0.5 * np.sum(z * z, axis=1)
 
     def sample_prior(self, n: int, rng: np.random.Generator) -> np.ndarray:
-        out = np.empty((n, self.dim))
-        out[:, : self.sigma_start] = self.prior_mean + self.prior_sd * rng.standard_normal((n, self.sigma_start))
-        out[:, self.sigma_start:] = rng.uniform(*LOG_SIGMA_BOUNDS, size=(n, self.n_flights))
-        return out
+        return self.prior_mean + self.prior_sd * rng.standard_normal((n, self.dim))
 
     # -- states -----------------------------------------------------------------------------------------
     def ic_to_state(self, ic: np.ndarray, k: int) -> np.ndarray:
@@ -138,27 +143,40 @@ class Problem:
         r = markers[:, self._masks[k]] - self._obs[k][None]
         return r.reshape(r.shape[0], -1), ok
 
-    def log_likelihood(self, theta: np.ndarray) -> np.ndarray:
+    def sum_squares(self, theta: np.ndarray) -> np.ndarray:
+        """S_f (B, n_flights) [m²]: summed squared marker residuals per flight; inf where a lane failed."""
         theta = np.atleast_2d(theta)
-        total = np.zeros(theta.shape[0])
+        out = np.empty((theta.shape[0], self.n_flights))
         for k in range(self.n_flights):
             r, ok = self.residuals(theta, k)
-            log_sigma = theta[:, self.sigma_start + k]
             ss = np.sum(r * r, axis=1)
-            n = self.n_coords[k]
-            ll = -0.5 * ss * np.exp(-2 * log_sigma) - n * log_sigma - 0.5 * n * LOG_2PI
-            total += np.where(ok & np.isfinite(ss), ll, -np.inf)
-        return total
+            out[:, k] = np.where(ok & np.isfinite(ss), ss, np.inf)
+        return out
+
+    def log_likelihood_from_ss(self, ss: np.ndarray) -> np.ndarray:
+        """Σ_f log p(y_f | θ) with σ_f integrated out (see module docstring)."""
+        n = self.n_coords
+        const = gammaln(n / 2) - np.log(2.0) - 0.5 * n * np.log(np.pi)
+        return np.sum(const - 0.5 * n * np.log(ss), axis=1)
+
+    def log_likelihood(self, theta: np.ndarray) -> np.ndarray:
+        return self.log_likelihood_from_ss(self.sum_squares(theta))
+
+    def log_prob_blobs(self, theta: np.ndarray) -> np.ndarray:
+        """Vectorised log-posterior for emcee with blobs: rows (log p(θ | y), S_1 … S_F), shape (B, 1 + F)."""
+        theta = np.atleast_2d(theta)
+        ss = self.sum_squares(theta)
+        lp = self.log_prior(theta) + self.log_likelihood_from_ss(ss)
+        lp = np.where(np.isfinite(lp), lp, -np.inf)
+        return np.column_stack([lp, ss])
 
     def log_prob(self, theta: np.ndarray) -> np.ndarray:
-        """Vectorised log-posterior for emcee (θ: (B, dim) → (B,))."""
-        theta = np.atleast_2d(theta)
-        lp = self.log_prior(theta)
-        out = np.full(theta.shape[0], -np.inf)
-        good = np.isfinite(lp)
-        if good.any():
-            out[good] = lp[good] + self.log_likelihood(theta[good])
-        return out
+        """Vectorised log-posterior p(θ | y) (θ: (B, dim) → (B,))."""
+        return self.log_prob_blobs(theta)[:, 0]
+
+    def draw_sigma(self, ss: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """σ_f [m] drawn from σ_f² | θ, y ~ S_f / χ²_{n_f} for sum-of-squares ss (..., n_flights)."""
+        return np.sqrt(ss / rng.chisquare(self.n_coords, size=ss.shape))
 
     def flight_rate(self, state: np.ndarray) -> float:
         """Integration rate for a flight: 1.25 × the fastest rate of its start (spin, nutation, aero)."""

@@ -7,13 +7,12 @@ CMa 0.13 ± 0.3. Rate coefficients get weak zero-centred priors an order of magn
 published value: CMq, CRp 0 ± 0.05, CRr 0 ± 0.01 (rad/s)⁻¹, CNr 0 ± 1e−3 (rad/s)⁻¹.
 ``weak``: zero-centred Gaussians on everything: CL0, CD0, CM0 ± 1, CLa, CDa ± 5, CMa ± 2, rate terms as above.
 Initial conditions (both): centred on the data-derived start with sd 0.5 m, 5 m/s, 0.5 rad, 30 rad/s.
-Noise scales: log σ uniform on [log 10 µm, log 10 cm].
+Noise scales: p(σ_f) ∝ 1/σ_f (Jeffreys), integrated out analytically (see ``model``).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
 
 from ..physics import COEFFICIENT_NAMES, POTTS_CROWTHER
 
@@ -22,7 +21,6 @@ PC_WIDTHS = {"CL0": 0.2, "CLa": 1.5, "CD0": 0.1, "CDa": 1.5, "CM0": 0.1, "CMa": 
 WEAK = {"CL0": (0.0, 1.0), "CLa": (0.0, 5.0), "CD0": (0.0, 1.0), "CDa": (0.0, 5.0), "CM0": (0.0, 1.0),
         "CMa": (0.0, 2.0)}
 IC_SD = {"position": 0.5, "velocity": 5.0, "attitude": 0.5, "omega": 30.0}
-LOG_SIGMA_BOUNDS = (np.log(1e-5), np.log(0.1))
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,8 @@
 """Posterior summaries (SPEC §6 ``summary.json``), ArviZ InferenceData and the terminal table."""
 from __future__ import annotations
 
+import warnings
+
 import arviz as az
 import numpy as np
 
@@ -11,26 +13,21 @@ from .priors import coefficient_prior
 from .sampler import Chains
 
 
-def public_name(name: str) -> str:
-    return "sigma_" + name[len("log_sigma_"):] if name.startswith("log_sigma_") else name
-
-
-def public_samples(problem: Problem, flat: np.ndarray) -> dict:
-    """Samples (..., dim) → {public name: values}; log σ becomes σ [m]."""
-    out = {}
-    for i, n in enumerate(problem.names):
-        v = flat[..., i]
-        out[public_name(n)] = np.exp(v) if n.startswith("log_sigma_") else v
+def public_samples(problem: Problem, theta: np.ndarray, sigma: np.ndarray) -> dict:
+    """Samples θ (..., dim) and σ (..., n_flights) → {public name: values} (σ in m)."""
+    out = {n: theta[..., i] for i, n in enumerate(problem.names)}
+    out.update({n: sigma[..., k] for k, n in enumerate(problem.sigma_names)})
     return out
 
 
 def summarize(problem: Problem, chains: Chains) -> dict:
-    post = chains.chain
+    post = np.concatenate([chains.chain, chains.sigma], axis=-1)
     rh = rhat_across(post)
     ess = ess_bulk(post)
-    flat = post.reshape(-1, problem.dim)
+    flat = post.reshape(-1, post.shape[-1])
     params = {}
-    for i, (name, values) in enumerate(public_samples(problem, flat).items()):
+    samples = public_samples(problem, flat[:, : problem.dim], flat[:, problem.dim:])
+    for i, (name, values) in enumerate(samples.items()):
         q05, q50, q95 = np.quantile(values, [0.05, 0.5, 0.95])
         q025, q975 = np.quantile(values, [0.025, 0.975])
         params[name] = {"mean": float(values.mean()), "sd": float(values.std(ddof=1)), "q05": float(q05),
@@ -58,7 +55,7 @@ def build_summary(problem: Problem, chains: Chains, ls_dict: dict, cfg_info: dic
             "walkers_per_ensemble": int(chains.chain.shape[2]), "total_steps": int(chains.total_steps),
             "burn_in_steps": int(chains.burn), "kept_steps": int(chains.chain.shape[1]),
             "tau_max_steps": float(np.nanmax(tau)),
-            "tau_steps": {public_name(n): float(t) for n, t in zip(problem.names, tau)},
+            "tau_steps": {n: float(t) for n, t in zip(problem.names, tau)},
             "n_over_tau": float(chains.chain.shape[1] / np.nanmax(tau)),
             "r_hat_max": float(max(p["r_hat"] for p in params.values())),
             "ess_bulk_min_coefficient": float(min(params[c]["ess_bulk"] for c in coef)),
@@ -72,19 +69,23 @@ def build_summary(problem: Problem, chains: Chains, ls_dict: dict, cfg_info: dic
 def build_inference_data(problem: Problem, chains: Chains, rng: np.random.Generator, n_prior: int = 4000):
     n_ens, n_steps, n_w, dim = chains.chain.shape
     per_walker = np.moveaxis(chains.chain, 2, 1).reshape(n_ens * n_w, n_steps, dim)
-    posterior = public_samples(problem, per_walker)
+    sig = np.moveaxis(chains.sigma, 2, 1).reshape(n_ens * n_w, n_steps, -1)
+    posterior = public_samples(problem, per_walker, sig)
     lp = np.moveaxis(chains.log_prob, 2, 1).reshape(n_ens * n_w, n_steps)
-    prior = public_samples(problem, problem.sample_prior(n_prior, rng)[None])
+    # prior on σ_f is the improper 1/σ; the prior group shows it on [10 µm, 10 cm] (log-uniform)
+    prior_sigma = np.exp(rng.uniform(np.log(1e-5), np.log(0.1), size=(1, n_prior, problem.n_flights)))
+    prior = public_samples(problem, problem.sample_prior(n_prior, rng)[None], prior_sigma)
     observed, coords, dims = {}, {}, {}
     for f in problem.flights:
         key = f"markers_{f.name}"
         observed[key] = f.positions
         coords[f"time_{f.name}"] = f.times
         dims[key] = [f"time_{f.name}", "marker", "axis"]
-    coords.update(marker=list(problem.flights[0].marker_ids), axis=["x", "y", "z"],
-                  chain=np.arange(n_ens * n_w), draw=np.arange(n_steps))
-    idata = az.from_dict(posterior=posterior, sample_stats={"lp": lp}, prior=prior, observed_data=observed,
-                         coords=coords, dims=dims)
+    coords.update(marker=list(problem.flights[0].marker_ids), axis=["x", "y", "z"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # short runs: "more chains than draws" is fine
+        idata = az.from_dict(posterior=posterior, sample_stats={"lp": lp}, prior=prior, observed_data=observed,
+                             coords=coords, dims=dims)
     idata.posterior.attrs["ensemble_of_chain"] = np.repeat(np.arange(n_ens), n_w).tolist()
     idata.posterior.attrs["note"] = ("chains are emcee walkers; walker w of ensemble e is chain e*n_walkers+w; "
                                      "R-hat in summary.json is computed across ensembles")

@@ -20,7 +20,9 @@ def _flight_info(problem) -> dict:
                      "t_start": float(f.times[0]), "t_end": float(f.times[-1])} for f in problem.flights}
 
 
-def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True, log=print) -> dict:
+def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True, log=print, report: bool = True,
+               reports_dir="reports") -> dict:
+    """Least squares, emcee, summary.json, posterior.nc and (``report``) ``reports/<name>.html``."""
     t0 = time.perf_counter()
     out = Path(cfg.output)
     out.mkdir(parents=True, exist_ok=True)
@@ -33,6 +35,7 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True, log=
     ls_dict = ls.to_dict()
     ls_path.write_text(json.dumps(ls_dict, indent=1))
     np.save(out / "least_squares_cov.npy", ls.cov)
+    np.save(out / "least_squares_theta.npy", ls.theta)
     log(f"least squares: cost {ls.cost:.1f}, condition number {ls.condition_number:.3g}, RMS "
         + ", ".join(f"{k} {v:.2f} mm" for k, v in ls_dict["rms_mm"].items()))
     chains = run_sampler(problem, ls.theta, ls.cov, cfg.sampler, out, resume=resume, progress=progress)
@@ -42,8 +45,9 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True, log=
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     idata = build_inference_data(problem, chains, np.random.default_rng(cfg.sampler.seed))
     idata.to_netcdf(str(out / "posterior.nc"))
+    from ..report.content import software_versions
     run_info = {"wall_time_s": time.perf_counter() - t0, "sampling_wall_time_s": chains.wall_time_s,
-                "history": chains.history}
+                "history": chains.history, "versions": software_versions()}
     (out / "run_info.json").write_text(json.dumps(run_info, indent=1))
     log(format_table(summary))
     c = summary["convergence"]
@@ -52,4 +56,8 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True, log=
         f"R-hat max {c['r_hat_max']:.4f}, min coefficient ESS {c['ess_bulk_min_coefficient']:.0f}; "
         f"{run_info['wall_time_s']:.0f} s")
     log(f"wrote {out / 'summary.json'}, {out / 'posterior.nc'}")
+    if report:
+        from ..report import build_report
+        path = build_report(out, reports_dir=Path(reports_dir), seed=cfg.sampler.seed, log=log)
+        log(f"wrote {path}")
     return summary

@@ -4,14 +4,18 @@
   file, advanced in rounds of ``check_every`` steps (in parallel processes), so an interrupted run
   resumes from the files with no lost samples.
 * Walkers start from the least-squares optimum spread by its Gauss–Newton covariance.
-* Moves: an *independence* Metropolis–Hastings move (multivariate Gaussian; the acceptance includes
-  the proposal density ratio, so each kernel leaves the posterior invariant) mixed with emcee's
-  differential-evolution moves, which take over where the posterior is far from Gaussian. The
-  independence proposal starts as the Laplace approximation (least-squares optimum and covariance) and
-  is re-fitted to the pooled ensembles' samples twice during warm-up (after ``adapt_steps`` and
-  2·``adapt_steps`` steps); it is fixed afterwards and the warm-up is discarded as burn-in.
-* Stopping: every chain ≥ n_tau · τ after burn-in (τ: emcee's integrated autocorrelation time), R-hat
-  across ensembles < ``rhat`` for every parameter, bulk ESS ≥ ``ess`` for every coefficient; or the cap.
+* Moves: Metropolis–Hastings moves built on a Gaussian reference N(μ, Σ) — independence jumps and
+  preconditioned Crank–Nicolson steps; the acceptance includes the proposal density ratio, so each
+  kernel leaves the posterior invariant — mixed with emcee's differential-evolution moves, which take
+  over where the posterior is far from Gaussian. The reference starts as the Laplace approximation
+  (least-squares optimum and covariance) and is re-fitted to the pooled ensembles' samples twice
+  during warm-up (after ``adapt_steps`` and 2·``adapt_steps`` steps); it is fixed afterwards and the
+  warm-up is discarded as burn-in.
+* Stopping: R-hat across ensembles < ``rhat`` for every parameter, bulk ESS ≥ ``ess`` for every
+  coefficient (ArviZ, rank-normalised; walkers as chains, so walkers that have not mixed lower it),
+  and every chain ≥ ``n_tau`` · τ after burn-in (τ: emcee's integrated autocorrelation time,
+  reported with N/τ; emcee's walker-averaged τ ignores differences between walkers, which the ESS
+  catches, so the default n_tau is a floor of 10 rather than emcee's 50); or the ``max_steps`` cap.
 """
 from __future__ import annotations
 
@@ -31,17 +35,27 @@ from .model import Problem
 # so the importance weights vary by e^±10 and almost nothing is accepted. Gaussian (ν = ∞) it is.
 T_DOF = np.inf
 ADAPTATIONS = 2
-PROPOSAL_INFLATION = 1.1  # proposal sd / posterior sd after adaptation
+PROPOSAL_INFLATION = 1.03  # proposal sd / posterior sd after adaptation (slightly wider: safe tails)
 
 
 @dataclass(frozen=True)
 class Proposal:
-    """Independence proposal N(μ, Σ) (or a Student-t with ν dof when ν is finite), Σ = L Lᵀ."""
+    """Gaussian reference N(μ, Σ), Σ = L Lᵀ (a Student-t with ν dof when ν is finite), used as a
+    preconditioned Crank–Nicolson proposal x′ = μ + ρ (x − μ) + √(1 − ρ²) L z, z ~ N(0, I).
+
+    ρ = 0 is the independence sampler; ρ > 0 makes a local move that is reversible with respect to
+    the Gaussian, so its Metropolis–Hastings factor is the same density ratio N(x) / N(x′)
+    (Cotter et al. 2013). Where the posterior deviates from the Gaussian, ρ > 0 keeps acceptance high
+    while ρ = 0 makes the big jumps. (Gaussian only: with finite ν the factor holds for ρ = 0.)"""
 
     mean: np.ndarray
     chol: np.ndarray
     dof: float = T_DOF
     adapted: int = 0   # how many warm-up re-fits this proposal has had
+    rho: float = 0.0
+
+    def with_rho(self, rho: float) -> "Proposal":
+        return Proposal(self.mean, self.chol, self.dof, self.adapted, rho)
 
     @classmethod
     def from_cov(cls, mean, cov, dof=T_DOF, adapted=0) -> "Proposal":
@@ -70,8 +84,12 @@ class Proposal:
         return self.mean + (z @ self.chol.T) / np.sqrt(g)[:, None]
 
     def __call__(self, coords, random):
-        """emcee MHMove proposal: new points and ln q(x) − ln q(x′)."""
-        new = self.draw(coords.shape[0], random)
+        """emcee MHMove proposal: new points and ln q(x | x′) − ln q(x′ | x) = ln N(x) − ln N(x′)."""
+        fresh = self.draw(coords.shape[0], random)
+        if self.rho == 0.0:
+            new = fresh
+        else:
+            new = self.mean + self.rho * (coords - self.mean) + np.sqrt(1 - self.rho**2) * (fresh - self.mean)
         return new, self.log_density(coords) - self.log_density(new)
 
     def save(self, path: Path) -> None:
@@ -93,10 +111,14 @@ def scaled_cholesky(cov: np.ndarray) -> np.ndarray:
     return d[:, None] * np.linalg.cholesky((V * w) @ V.T)
 
 
+#: share of the Gaussian-reference moves by ρ (independence jumps and pCN steps of two lengths)
+PCN_MIX = ((0.0, 0.4), (0.7, 0.35), (0.9, 0.25))
+
+
 def _moves(proposal: Proposal, fraction: float):
     moves = []
     if fraction > 0:
-        moves.append((emcee.moves.MHMove(proposal), fraction))
+        moves += [(emcee.moves.MHMove(proposal.with_rho(rho)), fraction * share) for rho, share in PCN_MIX]
     if fraction < 1:
         moves += [(emcee.moves.DEMove(), 0.8 * (1 - fraction)), (emcee.moves.DESnookerMove(), 0.2 * (1 - fraction))]
     return moves
@@ -137,8 +159,8 @@ def _advance(task) -> int:
     problem, proposal, fraction = _WORKER["problem"], _WORKER["proposal"], _WORKER["fraction"]
     backend = emcee.backends.HDFBackend(str(path))
     nw = start.shape[0] if start is not None else backend.shape[0]
-    sampler = emcee.EnsembleSampler(nw, problem.dim, problem.log_prob, vectorize=True, backend=backend,
-                                    moves=_moves(proposal, fraction))
+    sampler = emcee.EnsembleSampler(nw, problem.dim, problem.log_prob_blobs, vectorize=True, backend=backend,
+                                    moves=_moves(proposal, fraction), blobs_dtype=float)
     if start is not None:
         sampler.random_state = np.random.RandomState(seed).get_state()
         sampler.run_mcmc(start, n_steps, progress=False)
@@ -149,10 +171,12 @@ def _advance(task) -> int:
 
 @dataclass
 class Chains:
-    """Post-burn-in samples: chain (n_ensembles, n_steps, n_walkers, dim), log_prob alike without dim."""
+    """Post-burn-in samples: chain (n_ensembles, n_steps, n_walkers, dim), log_prob alike without dim,
+    σ per flight (n_ensembles, n_steps, n_walkers, n_flights) drawn from its exact conditional."""
 
     chain: np.ndarray
     log_prob: np.ndarray
+    sigma: np.ndarray
     acceptance: np.ndarray          # (n_ensembles, n_walkers)
     burn: int
     total_steps: int
@@ -163,20 +187,43 @@ class Chains:
     wall_time_s: float = 0.0
 
 
-def _read(paths):
-    chains, lps, acc = [], [], []
+def _read(paths, blobs: bool = False):
+    chains, lps, acc, ss = [], [], [], []
     for p in paths:
         b = emcee.backends.HDFBackend(str(p), read_only=True)
         chains.append(b.get_chain())
         lps.append(b.get_log_prob())
         acc.append(b.accepted / max(b.iteration, 1))
+        if blobs:  # S_f per flight; emcee drops the last axis when there is one flight
+            c = chains[-1]
+            ss.append(np.asarray(b.get_blobs(), float).reshape(c.shape[0], c.shape[1], -1))
     n = min(c.shape[0] for c in chains)
-    return (np.stack([c[:n] for c in chains]), np.stack([lp[:n] for lp in lps]), np.stack(acc))
+    out = (np.stack([c[:n] for c in chains]), np.stack([lp[:n] for lp in lps]), np.stack(acc))
+    if blobs:
+        out = out + (np.stack([x[:n] for x in ss]),)
+    return out
 
 
-def _tau(chain: np.ndarray) -> np.ndarray:
-    """Integrated autocorrelation time per parameter (steps), emcee's estimator on the walker mean."""
-    return emcee.autocorr.integrated_time(chain, tol=0, quiet=True)
+def _tau(chain: np.ndarray, c: float = 5.0) -> np.ndarray:
+    """Integrated autocorrelation time per parameter (steps): emcee's estimator (walker-averaged
+    autocorrelation function, Sokal's automatic window c), skipping walkers that did not move in the
+    window (their autocorrelation is undefined; emcee would return NaN)."""
+    n_steps, n_w, dim = chain.shape
+    tau = np.empty(dim)
+    for d in range(dim):
+        f = np.zeros(n_steps)
+        used = 0
+        for k in range(n_w):
+            x = chain[:, k, d]
+            if np.ptp(x) > 0:
+                f += emcee.autocorr.function_1d(x)
+                used += 1
+        if used == 0:
+            tau[d] = np.inf
+            continue
+        taus = 2.0 * np.cumsum(f / used) - 1.0
+        tau[d] = taus[emcee.autocorr.auto_window(taus, c)]
+    return tau
 
 
 def convergence(chain: np.ndarray, settings: SamplerSettings, coef_idx: np.ndarray, min_burn: int = 0):
@@ -212,7 +259,7 @@ def run_sampler(problem: Problem, theta0: np.ndarray, cov0: np.ndarray, settings
     existing = [p.exists() for p in paths]
     if resume and all(existing) and prop_path.exists():
         proposal = Proposal.load(prop_path)
-        done = min(emcee.backends.HDFBackend(str(p), read_only=True).iteration for p in paths)
+        done = int(min(emcee.backends.HDFBackend(str(p), read_only=True).iteration for p in paths))
         starts = [None] * len(paths)
     else:
         if any(existing) and not resume:
@@ -249,6 +296,7 @@ def run_sampler(problem: Problem, theta0: np.ndarray, cov0: np.ndarray, settings
                     chain, _, _ = _read(paths)
                     verdict = convergence(chain, settings, coef_idx, min_burn=adapt_at[-1])
                     history.append({"steps": done, **{k: v for k, v in verdict.items() if k != "tau"}})
+                    (chain_dir / "history.json").write_text(json.dumps(history, indent=1))
                     bar.set_postfix(rhat=f"{verdict['rhat_max']:.3f}", ess=f"{verdict['ess_min_coef']:.0f}",
                                     n_tau=f"{verdict['n_over_tau']:.0f}")
                     if verdict["converged"]:
@@ -261,16 +309,18 @@ def run_sampler(problem: Problem, theta0: np.ndarray, cov0: np.ndarray, settings
                 if proposal.adapted < ADAPTATIONS:
                     n = min(n, adapt_at[proposal.adapted] - done)
                 tasks = [(p, n, s, settings.seed * 1000 + e) for e, (p, s) in enumerate(zip(paths, starts))]
-                done = min(pool.map(_advance, tasks))
+                done = int(min(pool.map(_advance, tasks)))
                 starts = [None] * len(paths)
                 bar.update(n)
     bar.close()
-    chain, lp, acc = _read(paths)
+    chain, lp, acc, ss = _read(paths, blobs=True)
     burn = verdict["burn"]
+    sigma = problem.draw_sigma(ss[:, burn:].reshape(-1, problem.n_flights),
+                               np.random.default_rng(settings.seed)).reshape(ss[:, burn:].shape)
     reason = ("converged" if verdict["converged"] else
               f"cap of {settings.max_steps} steps reached before convergence")
     (out_dir / "chains" / "history.json").write_text(json.dumps(history, indent=1))
-    return Chains(chain=chain[:, burn:], log_prob=lp[:, burn:], acceptance=acc, burn=burn,
+    return Chains(chain=chain[:, burn:], log_prob=lp[:, burn:], sigma=sigma, acceptance=acc, burn=burn,
                   total_steps=chain.shape[1], tau=verdict["tau"], converged=verdict["converged"], reason=reason,
                   history=history, wall_time_s=time.perf_counter() - t_start)
 

@@ -13,7 +13,8 @@ from scipy.integrate import solve_ivp
 
 from .constants import Coefficients, Disc, Environment
 from .equations import STATE_SIZE, marker_positions, state_derivative
-from .kernel import DEFAULT_STEP_FACTOR, STATUS_OK, STATUS_TEXT, TABLEAUX, get_kernel
+from .kernel import (DEFAULT_METHOD, DEFAULT_STEP_FACTOR, LANES, LANES_SMALL, STATUS_OK, STATUS_TEXT, TABLEAUX,
+                     get_kernel)
 from .terms import Term
 
 
@@ -21,14 +22,15 @@ from .terms import Term
 class SimulatorSettings:
     """Integrator settings.
 
-    method: Runge–Kutta tableau (``rk6`` Butcher 7-stage 6th order, or ``rk4``); step_factor c: the
-    substep is h ≤ c/ω_c (see :mod:`.kernel`), None for the method's default; omega_cap [rad/s]: lanes
-    faster than this are flagged; speed_cap [m/s]: lanes faster than this are flagged; fixed_rate
+    method: Runge–Kutta tableau of :data:`.kernel.TABLEAUX` (default ``vern7``: Verner's 9-stage 7th
+    order; also ``dop853`` 12-stage 8th order, ``rk6`` Butcher 7-stage 6th order, ``rk4``); step_factor
+    c: the substep is h ≤ c/ω_c (see :mod:`.kernel`), None for the method's default; omega_cap [rad/s]:
+    lanes faster than this are flagged; speed_cap [m/s]: lanes faster than this are flagged; fixed_rate
     [rad/s]: if set, every substep is h = c / fixed_rate (a parameter-independent schedule, so results
     are smooth in the parameters) and lanes whose own rate exceeds rate_margin · fixed_rate are flagged.
     """
 
-    method: str = "rk6"
+    method: str = DEFAULT_METHOD
     step_factor: float | None = None
     omega_cap: float = 5000.0
     speed_cap: float = 300.0
@@ -112,9 +114,9 @@ def simulate(initial_states, coefficients, times, *, t0: float | None = None, di
     out_states = np.empty((batch, n if want_states else 0, STATE_SIZE))
     out_markers = np.empty((batch, n if mb.shape[0] else 0, mb.shape[0], 3))
     status = np.zeros(batch, dtype=np.int64)
-    A, b, c = TABLEAUX[settings.method]
-    kernel = get_kernel(tuple(terms))
-    kernel(y0, coef, ext, _constants(disc, env), t0, times, mb, A, b, c, settings.c,
+    # groups of 8 lanes for batches, of 4 for a few lanes (identical results either way)
+    kernel = get_kernel(tuple(terms), settings.method, LANES_SMALL if batch <= LANES_SMALL else LANES)
+    kernel(y0, coef, ext, _constants(disc, env), t0, times, mb, settings.c,
            settings.omega_cap, settings.speed_cap, settings.fixed_rate or 0.0, settings.rate_margin,
            out_states, out_markers, status)
     failed = status != STATUS_OK

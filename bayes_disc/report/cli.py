@@ -1,0 +1,28 @@
+"""``bayes-disc report RUN_DIR [--reports-dir DIR]``: register into the main parser with :func:`register`."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from .errors import ReportInputError
+
+
+def _report(args) -> int:
+    from .run import build_report
+    try:
+        build_report(args.run_dir, reports_dir=Path(args.reports_dir), seed=args.seed, log=print)
+    except ReportInputError as e:
+        print(f"bayes-disc report: {e}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def register(subparsers) -> None:
+    """Add the ``report`` subcommand to an argparse subparsers object."""
+    p = subparsers.add_parser("report", help="HTML report and figures of a `sample` run folder",
+                              description="Write reports/<name>.html (self-contained) and the figures as PNG and "
+                                          "PDF in RUN_DIR/figures.")
+    p.add_argument("run_dir", help="output folder of `bayes-disc sample` (holds summary.json, posterior.nc)")
+    p.add_argument("--reports-dir", default="reports", help="folder for <name>.html (default: ./reports)")
+    p.add_argument("--seed", type=int, default=0, help="seed for the posterior draws of bands (default 0)")
+    p.set_defaults(func=_report)

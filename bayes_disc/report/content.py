@@ -1,0 +1,379 @@
+"""The standard section builders (see :mod:`.sections`). Each takes a ReportContext, returns a Section."""
+from __future__ import annotations
+
+import platform
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+from . import figures as F
+from .sections import Raw, Section, esc, fmt, table
+
+LIT_LABELS = {"potts_crowther": "Potts & Crowther 2000", "hummel2002": "Hummel & Hubbard 2002 (Table 2)"}
+#: at most this many steps per trace line and draws per chain in the rank plots (evenly thinned)
+MAX_TRACE_STEPS = 1000
+MAX_RANK_DRAWS = 250
+FORCE_COEFS = ("CL0", "CLa", "CD0", "CDa", "CM0", "CMa")
+IC_LABELS = {"x": "x [m]", "y": "y [m]", "z": "z [m]", "vx": "vx [m/s]", "vy": "vy [m/s]", "vz": "vz [m/s]",
+             "th1": "ϑ1 [rad]", "th2": "ϑ2 [rad]", "th3": "ϑ3 [rad]", "wx": "ωx [rad/s]", "wy": "ωy [rad/s]",
+             "wz": "ωz [rad/s]"}
+
+
+# ---------------------------------------------------------------------------------------------- helpers
+def _figure(ctx, fig, name: str, caption: str):
+    rf = F.save_figure(fig, ctx.figure_dir, name, caption)
+    ctx.figures_written.append(rf)
+    return rf
+
+
+def _range(x, digits=1, scale=1.0) -> str:
+    x = np.asarray(x, float) * scale
+    if not np.isfinite(x).any():
+        return "–"
+    return f"{np.nanmin(x):.{digits}f} … {np.nanmax(x):.{digits}f}"
+
+
+def software_versions() -> dict[str, str]:
+    """Versions of bayes-disc, Python and the numerical packages (for run_info.json and the report)."""
+    from .. import __version__
+    out = {"bayes-disc": __version__, "Python": platform.python_version()}
+    for pkg in ("numpy", "scipy", "numba", "emcee", "arviz", "corner", "matplotlib", "h5py"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = "not installed"
+    return out
+
+
+def _prior_table(name: str) -> dict:
+    """{coefficient: (mean, sd)} of the run's named Gaussian prior; empty if the name is unknown."""
+    from ..inference.priors import coefficient_prior
+    try:
+        cp = coefficient_prior(name)
+    except KeyError:
+        return {}
+    return {k: (cp.mean[k], cp.sd[k]) for k in cp.mean}
+
+
+def _interval(p: dict, lo: str, hi: str) -> str:
+    return f"{fmt(p[lo])} … {fmt(p[hi])}"
+
+
+def _mark(value, p: dict) -> Raw:
+    """A literature/truth value, marked when it lies outside the posterior 95 % interval."""
+    if value is None:
+        return Raw("–")
+    outside = not (p["q025"] <= value <= p["q975"])
+    if outside:
+        return Raw(f'<span class="disagree" title="outside the posterior 95 % interval">{esc(fmt(value))} ✗</span>')
+    return Raw(f'<span class="agree">{esc(fmt(value))}</span>')
+
+
+# ---------------------------------------------------------------------------------------------- sections
+def run_summary(ctx) -> Section:
+    s = ctx.summary
+    conv = s["convergence"]
+    info = ctx.run.run_info
+    kin = ctx.kinematics
+    files = sorted({str(f.get("file", "")) for f in s["flights"].values()})
+    general = table(["item", "value"], [
+        ("run", s["name"]), ("run folder", str(ctx.run.run_dir)), ("configuration", str(ctx.run.config_path)),
+        ("data files", ", ".join(files)),
+        ("flights", len(s["flights"])),
+        ("posterior samples kept", f"{conv['kept_steps']} steps × {conv['walkers_per_ensemble']} walkers × "
+                                   f"{conv['ensembles']} ensembles = "
+                                   f"{conv['kept_steps'] * conv['walkers_per_ensemble'] * conv['ensembles']}"),
+        ("prior", f"{s['prior']['name']}: {s['prior']['description']}"),
+        ("physics terms beyond SPEC §2", ", ".join(s.get("physics_terms") or []) or "none"),
+        ("truth file", "yes (synthetic data; truths overlaid)" if ctx.truth_coefficients else "no"),
+        ("wall time of the run", f"{info['wall_time_s']:.0f} s" if "wall_time_s" in info else "–"),
+        ("of which sampling", f"{info['sampling_wall_time_s']:.0f} s" if "sampling_wall_time_s" in info else "–"),
+    ], "kv")
+    rows = []
+    for k, (name, f) in enumerate(s["flights"].items()):
+        kk = kin[k]
+        rows.append((name, Path(str(f.get("file", ""))).name, f.get("samples"), f.get("points"),
+                     f"{fmt(f.get('t_start'))} … {fmt(f.get('t_end'))}", _range(kk["alpha_ref"], 1, 180 / np.pi),
+                     _range(kk["speed"], 1), _range(kk["spin"], 0)))
+    flights = table(["flight", "file", "samples", "marker points", "t [s]", "α [deg]", "speed [m/s]",
+                     "spin ω·b3 [rad/s]"], rows)
+    verdict_cls = "ok" if conv["converged"] else "warn"
+    state = "converged" if conv["converged"] else "NOT converged"
+    verdict = (f'<p class="verdict {verdict_cls}"><b>Convergence: {state}'
+               f"</b> — {esc(conv['reason'])}. R-hat max {fmt(conv.get('r_hat_max'))}, smallest coefficient bulk "
+               f"ESS {fmt(conv.get('ess_bulk_min_coefficient'), 3)}, τ max {fmt(conv.get('tau_max_steps'), 3)} "
+               f"steps, kept/τ {fmt(conv.get('n_over_tau'), 3)}, mean acceptance "
+               f"{fmt(conv.get('acceptance_mean'), 2)}; burn-in {conv['burn_in_steps']} of {conv['total_steps']} "
+               "steps.</p>")
+    settings = s.get("sampler_settings") or {}
+    sampler = table(["sampler setting", "value"], sorted((k, v) for k, v in settings.items()), "kv")
+    ls = s.get("least_squares") or {}
+    ls_rows = [("cost", fmt(ls.get("cost"))), ("condition number", fmt(ls.get("condition_number"), 3)),
+               ("RMS per flight [mm]", ", ".join(f"{k} {v:.2f}" for k, v in (ls.get("rms_mm") or {}).items()))]
+    recorded = info.get("versions")
+    if isinstance(recorded, dict) and recorded:
+        software = ("<h3>Software (recorded by the run)</h3>"
+                    + table(["package", "version"], list(recorded.items()), "kv"))
+    else:
+        software = ("<h3>Software (building this report)</h3><p class=note>The run folder records no versions; "
+                    "these are the versions that built the report.</p>"
+                    + table(["package", "version"], list(software_versions().items()), "kv"))
+    html = (verdict + "<h3>Run</h3>" + general + "<h3>Flights</h3>"
+            + "<p class=note>α, speed and spin ranges are those of the highest-posterior draw's trajectory.</p>"
+            + flights + '<div class="cols"><div><h3>Sampler</h3>' + sampler
+            + "</div><div><h3>Least-squares start</h3>" + table(["item", "value"], ls_rows, "kv")
+            + software + "</div></div>")
+    return Section("summary", "Run summary",
+                   "What was fitted and how: data, flights and the conditions they cover, prior, sampler, whether "
+                   "the chains converged, and the software that produced it.", html)
+
+
+def coefficient_table(ctx) -> Section:
+    s = ctx.summary
+    p = s["parameters"]
+    lit = s["literature"]
+    truth = ctx.truth_coefficients
+    prior = _prior_table(s["prior"]["name"])
+    heads = (["coefficient", "prior mean ± sd", "median", "90 % interval", "95 % interval"]
+             + [LIT_LABELS.get(k, k) for k in lit])
+    if truth:
+        heads.append("truth")
+    heads += ["R-hat", "ESS"]
+    rows = []
+    for n in s["coefficients"]:
+        q = p[n]
+        pm = prior.get(n)
+        row = [n, "–" if pm is None else f"{fmt(pm[0])} ± {fmt(pm[1])}", fmt(q["q50"]), _interval(q, "q05", "q95"),
+               _interval(q, "q025", "q975")]
+        row += [_mark(lit[k].get(n), q) for k in lit]
+        if truth:
+            row.append(_mark(truth.get(n), q))
+        row += [fmt(q["r_hat"]), fmt(q["ess_bulk"], 3)]
+        rows.append(row)
+    coef_html = table(heads, rows, "num")
+    # per-flight σ and initial conditions
+    from ..inference.model import IC_NAMES
+    flights = ctx.flight_names
+    frows = []
+    sig_row = ["σ [mm]"]
+    for f in flights:
+        q = p[f"sigma_{f}"]
+        t = ctx.truth_sigma(f)
+        cell = f"{q['q50'] * 1e3:.3g} ({q['q05'] * 1e3:.3g} … {q['q95'] * 1e3:.3g})"
+        if t is not None:
+            cell += f"<br><span class=truth>truth {t * 1e3:.3g}</span>"
+        sig_row.append(Raw(cell))
+    frows.append(sig_row)
+    truths = {f: ctx.truth_initial(k) for k, f in enumerate(flights)}
+    for j, ic in enumerate(IC_NAMES):
+        row = [IC_LABELS[ic]]
+        for f in flights:
+            q = p[f"{ic}_{f}"]
+            cell = f"{fmt(q['q50'])} ({fmt(q['q05'])} … {fmt(q['q95'])})"
+            t = truths[f]
+            if t is not None:
+                bad = not (q["q025"] <= t[j] <= q["q975"])
+                cell += (f"<br><span class=\"truth{' disagree' if bad else ''}\">truth {esc(fmt(t[j]))}"
+                         f"{' ✗' if bad else ''}</span>")
+            row.append(Raw(cell))
+        frows.append(row)
+    flight_html = table(["parameter"] + flights, frows, "num")
+    html = (coef_html + "<p class=note>✗ marks a published (or true) value outside the posterior 95 % interval. "
+            "Rate coefficients (CMq, CRr, CRp, CNr) are per rad/s, as in SPEC §2; Potts &amp; Crowther give "
+            "no rate terms.</p><h3>Noise scale and initial conditions per flight</h3>" + flight_html
+            + "<p class=note>Median (5 % … 95 %). Initial state at the flight's first sample: position, "
+              "velocity, attitude as a rotation vector ϑ relative to the data-derived start attitude, and "
+              "body-frame angular velocity.</p>")
+    return Section("coefficients", "Coefficients",
+                   "Posterior median and 90 %/95 % intervals of the ten coefficients beside the published "
+                   "values; a ✗ means the published value is outside the 95 % interval.", html)
+
+
+def corner_section(ctx) -> Section:
+    x = ctx.coefficient_samples
+    rng = np.random.default_rng(ctx.seed + 1)
+    if x.shape[0] > ctx.n_corner_samples:
+        x = x[np.sort(rng.choice(x.shape[0], ctx.n_corner_samples, replace=False))]
+    names = ctx.coefficients
+    truth = ctx.truth_coefficients
+    truths = [truth.get(n) for n in names] if truth else None
+    fig = F.corner_figure(x, names, truths)
+    lv = " and ".join(f"{int(round(100 * v))} %" for v in F.CORNER_LEVELS)
+    cap = (f"Joint posterior of the ten coefficients ({x.shape[0]} samples). Contours enclose {lv} of the "
+           "posterior mass; dashed lines in the histograms are the 5 %, 50 % and 95 % quantiles"
+           + ("; red lines are the true values." if truths else "."))
+    rf = _figure(ctx, fig, "corner", cap)
+    return Section("corner", "Posterior of the ten coefficients",
+                   f"Diagonal: each coefficient's marginal; off-diagonal: pairs, contours at {lv} probability; "
+                   "elongated, tilted contours mean the data trade one coefficient against another.",
+                   f"<p class=note>{esc(cap)}</p>", [rf])
+
+
+def _trace_bands(ctx, names):
+    """Walker 5/50/95 % quantiles per step for each ensemble from the chain files (incl. burn-in)."""
+    import h5py
+    idx = [ctx.problem.names.index(n) for n in names]
+    chain_dir = ctx.run.run_dir / "chains"
+    files = sorted(chain_dir.glob("ensemble_*.h5"), key=lambda p: int(p.stem.split("_")[-1]))
+    bands = []
+    for path in files:
+        with h5py.File(path, "r") as f:
+            g = f["mcmc"]
+            n = int(g.attrs["iteration"])
+            c = g["chain"][:n, :, min(idx): max(idx) + 1][:, :, np.array(idx) - min(idx)]
+        thin = int(np.ceil(n / MAX_TRACE_STEPS))
+        bands.append(np.moveaxis(np.quantile(c[::thin], [0.05, 0.5, 0.95], axis=1), 0, -1))
+    return bands, thin
+
+
+def convergence_section(ctx) -> Section:
+    s = ctx.summary
+    conv = s["convergence"]
+    p = s["parameters"]
+    names = ctx.coefficients
+    figs = []
+    try:
+        bands, thin = _trace_bands(ctx, names)
+        burn = int(conv["burn_in_steps"])
+        src = "chain files (all steps" + (f", every {thin}th shown" if thin > 1 else "") + ")"
+    except (OSError, KeyError, ValueError):
+        bands, thin = [], 1
+    if not bands:  # chain files absent: kept steps from posterior.nc
+        post = ctx.coefficient_chains
+        ens = ctx.ensemble_of_chain
+        bands = [np.moveaxis(np.quantile(post[ens == e], [0.05, 0.5, 0.95], axis=0), 0, -1)
+                 for e in np.unique(ens)]
+        burn = 0
+        src = "posterior.nc (kept steps only)"
+    figs.append(_figure(ctx, F.trace_figure(bands, names, burn, step=thin), "trace",
+                        f"Traces per ensemble from the {src}: line = walker median, band = walkers' 5–95 % range."))
+    post = ctx.coefficient_chains
+    thin = int(np.ceil(post.shape[1] / MAX_RANK_DRAWS))
+    figs.append(_figure(ctx, F.rank_figure(post[:, ::thin], ctx.ensemble_of_chain, names), "ranks",
+                        "Rank plots of the kept samples" + (f" (every {thin}th step)" if thin > 1 else "")
+                        + ": histogram of each ensemble's ranks among all samples; flat at 1 (dotted) when the "
+                        "ensembles sample the same distribution."))
+    tau = conv.get("tau_steps") or {}
+    kept = conv["kept_steps"]
+    settings = s.get("sampler_settings") or {}
+
+    def row(n):
+        t = tau.get(n)
+        ratio = kept / t if t and np.isfinite(t) and t > 0 else None
+        r = p[n]["r_hat"]
+        bad = (r is None or not np.isfinite(r) or r >= settings.get("rhat", 1.01))
+        return [n, Raw(f'<span class="{"disagree" if bad else "agree"}">{esc(fmt(r))}</span>'),
+                fmt(p[n]["ess_bulk"], 3), fmt(t, 3), fmt(ratio, 3)]
+    main_names = names + [n for n in p if n.startswith("sigma_")]
+    ic_names = [n for n in p if n not in main_names]
+    heads = ["parameter", "R-hat (across ensembles)", "bulk ESS", "τ [steps]", "kept steps / τ"]
+    crit = (f"Stopping rule: kept steps ≥ {fmt(settings.get('n_tau'))} τ, R-hat &lt; {fmt(settings.get('rhat'))} "
+            f"for every parameter, bulk ESS ≥ {fmt(settings.get('ess'))} for every coefficient; cap "
+            f"{settings.get('max_steps', '–')} steps.")
+    html = (f"<p>{'Converged' if conv['converged'] else '<b>Not converged</b>'}: {esc(conv['reason'])}. {crit}</p>"
+            + table(heads, [row(n) for n in main_names], "num")
+            + f"<details><summary>Initial conditions ({len(ic_names)} parameters)</summary>"
+            + table(heads, [row(n) for n in ic_names], "num") + "</details>")
+    return Section("convergence", "Convergence",
+                   "Ensembles should overlap in the traces after burn-in and give flat rank histograms; R-hat "
+                   "near 1 (red if above the run's threshold), large ESS and many autocorrelation times τ.",
+                   html, figs)
+
+
+def residual_section(ctx) -> Section:
+    sims = ctx.flight_sims
+    fig = _figure(ctx, F.residual_figure(sims), "residuals",
+                  "Measured − predicted marker coordinates for the highest-posterior draw, per flight (columns), "
+                  "axis (rows) and marker (colours); cf. Hummel & Hubbard (2002) Fig. 2.")
+    rows = []
+    p = ctx.summary["parameters"]
+    for s in sims:
+        r = s.residuals * 1e3
+        per_axis = [float(np.sqrt(np.nanmean(r[..., a] ** 2))) for a in range(3)]
+        rows.append([s.name, f"{s.rms * 1e3:.2f}"] + [f"{v:.2f}" for v in per_axis]
+                    + [f"{p[f'sigma_{s.name}']['q50'] * 1e3:.2f}"])
+    html = table(["flight", "RMS [mm]", "x", "y", "z", "posterior σ median [mm]"], rows, "num")
+    return Section("residuals", "Residuals",
+                   "Residuals should look like white noise around zero with an RMS close to the fitted σ; "
+                   "slow trends or oscillations point at missing physics or a bad start.", html, [fig])
+
+
+def flight_section(ctx) -> Section:
+    sims = ctx.flight_sims
+    kin = ctx.kinematics
+    f_alpha = _figure(ctx, F.alpha_figure(sims, [k["alpha_ref"] for k in kin], [k["alpha_draws"] for k in kin]),
+                      "angle_of_attack", "Angle of attack against time per flight: highest-posterior draw and the "
+                      "90 % band of posterior draws (cf. Hummel & Hubbard 2002 Fig. 3).")
+    f_traj = _figure(ctx, F.trajectory_figure(sims), "trajectories",
+                     "Measured markers (dots) and the predicted marker paths of the highest-posterior draw "
+                     "(lines): top view (y against x) and side view (z against x).")
+    rng = np.random.default_rng(ctx.seed + 2)
+    bands = [F.predictive_bands(s, rng) for s in sims]
+    f_pp = _figure(ctx, F.predictive_figure(sims, bands), "posterior_predictive",
+                   f"Posterior predictive check ({len(ctx.band_indices)} posterior draws, each with its own "
+                   "noise σ): grey band = 90 % interval of replicated minus predicted coordinates (averaged over "
+                   "markers); dots = measured minus predicted.")
+    rows = [[s.name, f"{100 * b[2]:.1f} %", len(ctx.band_indices)] for s, b in zip(sims, bands)]
+    html = ("<p class=note>A well-calibrated fit has about 90 % of the measured coordinates inside their "
+            "90 % posterior predictive interval.</p>"
+            + table(["flight", "points inside 90 % predictive interval", "posterior draws"], rows, "num"))
+    return Section("flights", "Flights: angle of attack, trajectories and posterior predictive check",
+                   "Which angles of attack each flight covered (wide ranges pin down the α-slopes), how the "
+                   "predicted paths match the measured markers, and whether the data sit inside the predictive band.",
+                   html, [f_alpha, f_traj, f_pp])
+
+
+def force_curve_section(ctx) -> Section:
+    from .windtunnel import load_wind_tunnel
+    tunnel = load_wind_tunnel()
+    kin = ctx.kinematics
+    a_all = np.concatenate([k["alpha_ref"] for k in kin])
+    lo, hi = float(np.degrees(np.nanmin(a_all))), float(np.degrees(np.nanmax(a_all)))
+    samples = ctx.coefficient_samples[:, [ctx.coefficients.index(n) for n in FORCE_COEFS]]
+    rng = np.random.default_rng(ctx.seed + 3)
+    if samples.shape[0] > 4000:
+        samples = samples[rng.choice(samples.shape[0], 4000, replace=False)]
+    coef = {n: samples[:, i] for i, n in enumerate(FORCE_COEFS)}
+    lit = {LIT_LABELS.get(k, k): v for k, v in ctx.summary["literature"].items()}
+    fig = _figure(ctx, F.force_curve_figure(coef, (lo, hi), tunnel, lit, ctx.truth_coefficients), "force_curves",
+                  f"Implied CL(α) = CL0 + CLa·α, CD(α) = CD0 + CDa·α², CM(α) = CM0 + CMa·α: posterior median and "
+                  f"90 % band over the flown range α = {lo:.1f}…{hi:.1f}° (shaded; dotted: extrapolation of the "
+                  "median), published linearisations, and the wind-tunnel measurements (squares).")
+    html = (f"<p class=note>Wind-tunnel data: {esc(tunnel.citation)}</p>")
+    return Section("force-curves", "Implied force and moment curves",
+                   "The flights constrain the curves only over the flown α range (shaded); compare the band with "
+                   "the wind-tunnel squares there, not in the extrapolation.", html, [fig])
+
+
+def identifiability_section(ctx) -> Section:
+    data = ctx.run.extras.get("identifiability")
+    guide = ("Whether the data determine each coefficient: identified, weak or unidentified, with the reason.")
+    if not data:
+        html = ("<p class=placeholder>Not computed for this run: run <code>bayes-disc identifiability "
+                f"{esc(ctx.run.config_path)}</code> and rebuild the report.</p>")
+        return Section("identifiability", "Identifiability", guide, html)
+    rows = []
+    src = data.get("coefficients", data) if isinstance(data, dict) else {}
+    for name, v in src.items():
+        if isinstance(v, dict) and "verdict" in v:
+            rows.append([name, v.get("verdict"), v.get("reason", "")])
+    html = table(["coefficient", "verdict", "reason"], rows) if rows else "<p>identifiability.json has no verdicts.</p>"
+    return Section("identifiability", "Identifiability", guide, html)
+
+
+def missing_physics_section(ctx) -> Section:
+    data = ctx.run.extras.get("diagnosis")
+    guide = "Whether the residuals call for physics the model lacks (side force, wind, ground effect …), best first."
+    if not data:
+        html = ("<p class=placeholder>Not computed for this run: run <code>bayes-disc diagnose "
+                f"{esc(ctx.run.config_path)}</code> and rebuild the report.</p>")
+        return Section("missing-physics", "Missing physics", guide, html)
+    effects = data.get("effects") or []
+    rows = [[e.get("id"), e.get("evidence"), e.get("estimate"), e.get("where")] for e in effects if isinstance(e, dict)]
+    before, after = data.get("rms_before_mm") or {}, data.get("rms_after_mm") or {}
+    html = (f"<p>Verdict: <b>{esc(data.get('verdict', '–'))}</b></p>"
+            + (table(["effect", "evidence", "estimate", "where"], rows) if rows else "")
+            + table(["flight", "RMS before [mm]", "RMS after [mm]"],
+                    [[f, fmt(before.get(f)), fmt(after.get(f))] for f in before]))
+    return Section("missing-physics", "Missing physics", guide, html)

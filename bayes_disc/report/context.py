@@ -1,0 +1,373 @@
+"""Everything a section needs from a run folder, loaded once and computed lazily.
+
+:func:`load_run` validates the folder (``summary.json``, ``posterior.nc``, the run's config and data) and
+raises :class:`~.errors.ReportInputError` naming the offending file. :class:`ReportContext` adds the
+posterior draws, the rebuilt model and the simulated flights, each computed on first use and cached on
+the context (no module-level state). All random choices use ``numpy.random.default_rng(seed)``.
+"""
+from __future__ import annotations
+
+import json
+import warnings
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from .errors import ReportInputError
+from .sections import ReportFigure
+
+#: posterior draws simulated for bands and predictive checks
+N_BAND_DRAWS = 150
+#: samples shown in the corner plot (thinned at random)
+N_CORNER_SAMPLES = 8000
+
+
+def _read_json(path: Path, required: bool = True) -> dict | None:
+    if not path.is_file():
+        if required:
+            raise ReportInputError(path, "file not found (is this a `bayes-disc sample` output folder?)")
+        return None
+    try:
+        data = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ReportInputError(path, f"not valid JSON ({e})") from None
+    if not isinstance(data, dict):
+        raise ReportInputError(path, "expected a JSON object")
+    return data
+
+
+SUMMARY_KEYS = ("name", "parameters", "coefficients", "convergence", "flights", "literature", "prior")
+
+
+@dataclass
+class RunData:
+    """The files of a run folder."""
+
+    run_dir: Path
+    summary: dict
+    idata: object                 # arviz.InferenceData
+    run_info: dict
+    config_path: Path
+    truth: dict | None
+    extras: dict = field(default_factory=dict)   # optional outputs of later capabilities, by file stem
+
+
+def _find_config(run_dir: Path, recorded: str | None) -> Path:
+    """The run's config: the recorded path, else (if it moved) the same name beside the run folder."""
+    cands = []
+    if recorded:
+        p = Path(recorded)
+        cands.append(p)
+        if not p.is_absolute():
+            cands.append(run_dir.parent / p)
+        cands.append(run_dir.parent / p.name)
+    for c in cands:
+        if c.is_file():
+            return c
+    where = recorded or "summary.json key 'config'"
+    raise ReportInputError(where, f"run configuration not found (recorded in {run_dir / 'summary.json'})")
+
+
+def load_run(run_dir) -> RunData:
+    """Read and check a run folder written by ``bayes-disc sample``."""
+    import arviz as az
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir():
+        raise ReportInputError(run_dir, "run folder not found")
+    sp = run_dir / "summary.json"
+    summary = _read_json(sp)
+    missing = [k for k in SUMMARY_KEYS if k not in summary]
+    if missing:
+        raise ReportInputError(sp, f"missing key(s) {missing}")
+    pp = run_dir / "posterior.nc"
+    if not pp.is_file():
+        raise ReportInputError(pp, "file not found (is this a `bayes-disc sample` output folder?)")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            idata = az.from_netcdf(str(pp))
+    except Exception as e:  # netCDF/HDF errors come in many types
+        raise ReportInputError(pp, f"cannot read as ArviZ InferenceData ({type(e).__name__}: {e})") from None
+    if "posterior" not in idata.groups():
+        raise ReportInputError(pp, "no posterior group")
+    absent = [n for n in summary["parameters"] if n not in idata.posterior]
+    if absent:
+        raise ReportInputError(pp, f"posterior lacks parameter(s) {absent[:5]} listed in summary.json")
+    run_info = _read_json(run_dir / "run_info.json", required=False) or {}
+    config_path = _find_config(run_dir, summary.get("config"))
+    from ..observation.config_io import ConfigError
+    from ..inference.config import load_config
+    try:
+        cfg = load_config(config_path)
+    except ConfigError as e:
+        raise ReportInputError(config_path, f"run configuration no longer valid: {e.problem}") from None
+    truth = None
+    if cfg.truth is not None:
+        truth = _read_json(Path(cfg.truth))
+    extras = {}
+    for stem in ("identifiability", "diagnosis"):
+        extras[stem] = _read_json(run_dir / f"{stem}.json", required=False)
+    return RunData(run_dir=run_dir, summary=summary, idata=idata, run_info=run_info, config_path=config_path,
+                   truth=truth, extras=extras)
+
+
+def _public_name(name: str) -> str:
+    return "sigma_" + name[len("log_sigma_"):] if name.startswith("log_sigma_") else name
+
+
+@dataclass
+class FlightSim:
+    """Simulations of one flight: the reference draw and the band draws.
+
+    times (n,); measured (n, m, 3) with NaN where missing; ref_markers (n, m, 3), ref_states (n, 13);
+    draw_markers (B, n, m, 3), draw_states (B, n, 13) for the posterior draws (NaN where a lane failed);
+    sigma (B,) noise scale of each draw [m].
+    """
+
+    name: str
+    times: np.ndarray
+    measured: np.ndarray
+    marker_ids: tuple
+    ref_markers: np.ndarray
+    ref_states: np.ndarray
+    draw_markers: np.ndarray
+    draw_states: np.ndarray
+    sigma: np.ndarray
+    sigma_ref: float
+
+    @property
+    def residuals(self) -> np.ndarray:
+        """Measured − reference prediction (n, m, 3) [m], NaN where missing."""
+        return self.measured - self.ref_markers
+
+    @property
+    def rms(self) -> float:
+        """Root-mean-square residual over observed coordinates [m]."""
+        r = self.residuals
+        return float(np.sqrt(np.nanmean(r * r)))
+
+
+class ReportContext:
+    """A run plus lazily computed posterior draws and simulations; ``figure_dir`` receives PNG and PDF."""
+
+    def __init__(self, run: RunData, figure_dir: Path, seed: int = 0, n_band_draws: int = N_BAND_DRAWS,
+                 n_corner_samples: int = N_CORNER_SAMPLES):
+        self.run = run
+        self.n_corner_samples = int(n_corner_samples)
+        self.summary = run.summary
+        self.figure_dir = Path(figure_dir)
+        self.seed = int(seed)
+        self.n_band_draws = int(n_band_draws)
+        self.figures_written: list[ReportFigure] = []
+
+    # -- model ------------------------------------------------------------------------------------------
+    @cached_property
+    def config(self):
+        from ..inference.config import load_config
+        return load_config(self.run.config_path)
+
+    @cached_property
+    def problem(self):
+        from ..inference.data import build_problem
+        from ..observation.config_io import ConfigError
+        from ..observation.markers import MarkerFileError
+        try:
+            problem = build_problem(self.config)
+        except (ConfigError, MarkerFileError) as e:
+            raise ReportInputError(self.run.config_path, f"cannot rebuild the run's data: {e}") from None
+        recorded = self.summary["flights"]
+        now = {f.name: (int(f.times.size), int(f.n_points)) for f in problem.flights}
+        then = {k: (int(v.get("samples", -1)), int(v.get("points", -1))) for k, v in recorded.items()}
+        if now != then:
+            changed = sorted(set(now) ^ set(then)) or sorted(k for k in now if now[k] != then[k])
+            raise ReportInputError(self.run.config_path, f"flight data differ from the run's summary.json "
+                                   f"(flight(s) {changed}): data or config changed since the run")
+        needed = [_public_name(n) for n in problem.names] + [f"sigma_{f.name}" for f in problem.flights]
+        missing = [n for n in needed if n not in self.run.idata.posterior]
+        if missing:
+            raise ReportInputError(self.run.run_dir / "posterior.nc",
+                                   f"posterior lacks {missing[:5]} that the run's config implies")
+        return problem
+
+    @property
+    def coefficients(self) -> list[str]:
+        return list(self.summary["coefficients"])
+
+    @property
+    def flight_names(self) -> list[str]:
+        return list(self.summary["flights"])
+
+    @cached_property
+    def public_names(self) -> list[str]:
+        """posterior.nc names of θ's components (a sampled ``log_sigma_F`` is stored as ``sigma_F``)."""
+        return [_public_name(n) for n in self.problem.names]
+
+    # -- posterior --------------------------------------------------------------------------------------
+    def posterior_array(self, names) -> np.ndarray:
+        """(n_chain, n_draw, len(names)) posterior samples of public parameter names."""
+        post = self.run.idata.posterior
+        return np.stack([np.asarray(post[n].values, float) for n in names], axis=-1)
+
+    @cached_property
+    def n_samples(self) -> int:
+        """Number of kept posterior samples (chains × draws)."""
+        sizes = self.run.idata.posterior.sizes
+        return int(sizes["chain"] * sizes["draw"])
+
+    def theta_at(self, flat_index: np.ndarray) -> np.ndarray:
+        """Posterior samples at flat (chain-major) indices as θ rows (len, dim) in model order (log σ).
+
+        Reads one variable at a time, so a large posterior.nc is never held in memory as a whole."""
+        flat_index = np.asarray(flat_index, int)
+        post = self.run.idata.posterior
+        out = np.empty((flat_index.size, len(self.public_names)))
+        for i, (n, pub) in enumerate(zip(self.problem.names, self.public_names)):
+            v = np.asarray(post[pub].values, float).reshape(-1)[flat_index]
+            out[:, i] = np.log(v) if n.startswith("log_sigma_") else v
+        return out
+
+    @cached_property
+    def ref_index(self) -> int:
+        """Flat index of the reference draw: the posterior sample with the highest log-posterior
+        (``sample_stats.lp``), else the sample nearest the coefficients' medians."""
+        ss = getattr(self.run.idata, "sample_stats", None)
+        if ss is not None and "lp" in ss:
+            lp = np.asarray(ss["lp"].values, float).reshape(-1)
+            if lp.size == self.n_samples and np.isfinite(lp).any():
+                return int(np.nanargmax(lp))
+        x = self.coefficient_samples
+        z = (x - np.median(x, axis=0)) / (x.std(axis=0) + 1e-300)
+        return int(np.argmin(np.sum(z * z, axis=1)))
+
+    @cached_property
+    def band_indices(self) -> np.ndarray:
+        """Flat indices of the posterior draws simulated for bands (seeded, without replacement)."""
+        rng = np.random.default_rng(self.seed)
+        return np.sort(rng.choice(self.n_samples, size=min(self.n_band_draws, self.n_samples), replace=False))
+
+    @cached_property
+    def _theta_sel(self) -> np.ndarray:
+        return self.theta_at(np.r_[self.ref_index, self.band_indices])
+
+    @cached_property
+    def _sigma_sel(self) -> np.ndarray:
+        """(1 + B, n_flights) noise scales σ [m] of the reference and band draws."""
+        idx = np.r_[self.ref_index, self.band_indices]
+        post = self.run.idata.posterior
+        return np.stack([np.asarray(post[f"sigma_{f.name}"].values, float).reshape(-1)[idx]
+                         for f in self.problem.flights], axis=1)
+
+    @property
+    def theta_ref(self) -> np.ndarray:
+        """θ (dim,) of the reference draw."""
+        return self._theta_sel[0]
+
+    @property
+    def theta_draws(self) -> np.ndarray:
+        """θ (B, dim) of the band draws."""
+        return self._theta_sel[1:]
+
+    @cached_property
+    def coefficient_chains(self) -> np.ndarray:
+        """(n_chain, n_draw, n_coef) posterior of the coefficients (all kept samples)."""
+        return self.posterior_array(self.coefficients)
+
+    @property
+    def coefficient_samples(self) -> np.ndarray:
+        """(N, n_coef) flattened posterior of the coefficients."""
+        return self.coefficient_chains.reshape(-1, len(self.coefficients))
+
+    @cached_property
+    def ensemble_of_chain(self) -> np.ndarray:
+        attrs = self.run.idata.posterior.attrs
+        n_chain = self.run.idata.posterior.sizes["chain"]
+        e = np.asarray(attrs.get("ensemble_of_chain", np.zeros(n_chain, int))).astype(int).reshape(-1)
+        return e if e.size == n_chain else np.zeros(n_chain, int)
+
+    # -- simulations ------------------------------------------------------------------------------------
+    def simulate(self, theta: np.ndarray, k: int):
+        """States and markers of flight k for θ (B, dim): the same integrator settings as the model's."""
+        from ..physics import SimulatorSettings, simulate
+        p = self.problem
+        theta = np.atleast_2d(theta)
+        f = p.flights[k]
+        states = p.ic_to_state(theta[:, p.ic_slice(k)], k)
+        ext = theta[:, p.n_coef: p.ic_start] if p.n_ext else None
+        s = p.settings
+        if p.rates:
+            s = SimulatorSettings(method=s.method, step_factor=s.step_factor, omega_cap=s.omega_cap,
+                                  speed_cap=s.speed_cap, fixed_rate=p.rates[k], rate_margin=s.rate_margin)
+        return simulate(states, theta[:, : p.n_coef], f.times, t0=f.times[0], disc=p.disc, env=p.env,
+                        marker_body=p.marker_body, terms=p.terms, extension=ext, settings=s, want_states=True)
+
+    @cached_property
+    def flight_sims(self) -> list[FlightSim]:
+        p = self.problem
+        batch = self._theta_sel
+        out = []
+        for k, f in enumerate(p.flights):
+            tr = self.simulate(batch, k)
+            sig = self._sigma_sel[:, k]
+            out.append(FlightSim(name=f.name, times=f.times, measured=f.positions, marker_ids=tuple(f.marker_ids),
+                                 ref_markers=tr.markers[0], ref_states=tr.states[0], draw_markers=tr.markers[1:],
+                                 draw_states=tr.states[1:], sigma=sig[1:],
+                                 sigma_ref=float(sig[0])))
+        return out
+
+    def _wind(self, theta: np.ndarray) -> np.ndarray | None:
+        """Wind (…, 3) [m/s] of θ (…, dim) when the model has the ``wind`` term, else None."""
+        names = self.problem.ext_names
+        if not {"wind_x", "wind_y", "wind_z"} <= set(names):
+            return None
+        i = [self.problem.n_coef + names.index(n) for n in ("wind_x", "wind_y", "wind_z")]
+        return theta[..., i]
+
+    @cached_property
+    def kinematics(self) -> list[dict]:
+        """Per flight: α of the reference draw (n,) and of the band draws (B, n) [rad], air speed (n,) [m/s]
+        and spin ω·b3 (n,) [rad/s] of the reference draw."""
+        from ..physics.frames import angle_of_attack
+        out = []
+        w_ref = self._wind(self.theta_ref)
+        w_draw = self._wind(self.theta_draws)
+        for s in self.flight_sims:
+            st, sd = s.ref_states, s.draw_states
+            a_ref = angle_of_attack(st[:, 3:6], st[:, 6:10], None if w_ref is None else w_ref[None])
+            a_d = angle_of_attack(sd[..., 3:6], sd[..., 6:10], None if w_draw is None else w_draw[:, None, :])
+            v = st[:, 3:6] - (0.0 if w_ref is None else w_ref[None])
+            out.append({"alpha_ref": a_ref, "alpha_draws": a_d, "speed": np.linalg.norm(v, axis=1),
+                        "spin": st[:, 12]})
+        return out
+
+    # -- truth ------------------------------------------------------------------------------------------
+    @property
+    def truth_coefficients(self) -> dict | None:
+        t = self.run.truth
+        if not t or not isinstance(t.get("coefficients"), dict):
+            return None
+        return {k: float(v) for k, v in t["coefficients"].items()}
+
+    def truth_initial(self, k: int) -> np.ndarray | None:
+        """Flight k's true initial condition in model parameters (12,), or None without a truth file.
+
+        Only valid when the flight window starts where the truth's initial state is given."""
+        t = self.run.truth
+        f = self.problem.flights[k]
+        try:
+            s = t["flights"][f.name]["initial_state"]
+        except (TypeError, KeyError):
+            return None
+        if abs(float(s.get("t", f.times[0])) - float(f.times[0])) > 1e-9:
+            return None
+        state = np.concatenate([s["position_m"], s["velocity_m_s"], s["quaternion_wxyz_body_to_world"],
+                                s["omega_body_rad_s"]]).astype(float)
+        return self.problem.state_to_ic(state, k)
+
+    def truth_sigma(self, name: str) -> float | None:
+        t = self.run.truth
+        try:
+            return float(t["flights"][name]["noise_m"])
+        except (TypeError, KeyError, ValueError):
+            return None

@@ -1,0 +1,294 @@
+"""Matplotlib figures of the report (object-oriented API on the Agg canvas: no pyplot state).
+
+Every function returns a :class:`matplotlib.figure.Figure`; :func:`save_figure` writes it as PNG and PDF
+and returns the PNG bytes for embedding.
+"""
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from .sections import ReportFigure
+
+PNG_DPI = 90
+AXES = ("x", "y", "z")
+MARKER_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink")
+ENSEMBLE_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink",
+                   "tab:gray", "tab:olive", "tab:cyan")
+#: probability mass inside the corner plot's 2-D contours
+CORNER_LEVELS = (0.5, 0.9)
+
+
+def new_figure(width: float, height: float) -> Figure:
+    fig = Figure(figsize=(width, height), layout=None)
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def save_figure(fig: Figure, folder: Path, name: str, caption: str) -> ReportFigure:
+    """Write ``folder/name.png`` and ``folder/name.pdf``; return the embedded-figure record."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=PNG_DPI)
+    png = buf.getvalue()
+    png_path, pdf_path = folder / f"{name}.png", folder / f"{name}.pdf"
+    png_path.write_bytes(png)
+    fig.savefig(pdf_path, format="pdf")
+    return ReportFigure(name=name, caption=caption, png=png, png_path=str(png_path), pdf_path=str(pdf_path))
+
+
+def _grid(n: int, ncols: int) -> tuple[int, int]:
+    return int(np.ceil(n / ncols)), ncols
+
+
+# ---------------------------------------------------------------------------------------------- posterior
+def corner_figure(samples: np.ndarray, labels, truths=None, levels=CORNER_LEVELS) -> Figure:
+    """corner.py plot of samples (N, K) with 5/50/95 % quantile lines and 2-D contours at ``levels``."""
+    import corner
+    k = samples.shape[1]
+    fig = new_figure(1.45 * k, 1.45 * k)
+    # a parameter with no spread (degenerate test runs) still needs a range
+    rng = []
+    for j in range(k):
+        lo, hi = np.min(samples[:, j]), np.max(samples[:, j])
+        if not hi > lo:
+            pad = abs(lo) * 1e-6 + 1e-12
+            lo, hi = lo - pad, hi + pad
+        rng.append((lo, hi))
+    corner.corner(samples, fig=fig, labels=list(labels), truths=None if truths is None else list(truths),
+                  truth_color="tab:red", levels=levels, quantiles=(0.05, 0.5, 0.95), show_titles=True,
+                  title_fmt=".3g", title_kwargs={"fontsize": 9}, label_kwargs={"fontsize": 10}, bins=30,
+                  range=rng, plot_datapoints=False, plot_density=False, fill_contours=True, color="tab:blue",
+                  max_n_ticks=3)  # filled contours only: fast to draw and a small PDF
+    for ax in fig.axes:
+        ax.tick_params(labelsize=7)
+    return fig
+
+
+def trace_figure(bands: list[np.ndarray], names, burn: int, step: int = 1) -> Figure:
+    """Per-ensemble traces: bands[e] (steps, K, 3) = walker 5/50/95 % quantiles every ``step`` steps."""
+    k = len(names)
+    nr, nc = _grid(k, 2)
+    fig = new_figure(11, 1.7 * nr + 0.6)
+    axes = fig.subplots(nr, nc, sharex=True, squeeze=False).ravel()
+    for j, name in enumerate(names):
+        ax = axes[j]
+        for e, b in enumerate(bands):
+            c = ENSEMBLE_COLORS[e % len(ENSEMBLE_COLORS)]
+            steps = np.arange(b.shape[0]) * step
+            ax.fill_between(steps, b[:, j, 0], b[:, j, 2], color=c, alpha=0.18, lw=0)
+            ax.plot(steps, b[:, j, 1], color=c, lw=0.8, label=f"ensemble {e}" if j == 0 else None)
+        ax.axvline(burn, color="k", ls="--", lw=0.8, label="end of burn-in" if j == 0 else None)
+        ax.set_ylabel(name, fontsize=9)
+        ax.tick_params(labelsize=7)
+    for ax in axes[k:]:
+        ax.set_visible(False)
+    for ax in axes[max(0, k - nc): k]:
+        ax.set_xlabel("step", fontsize=9)
+    fig.legend(loc="upper center", ncol=min(len(bands) + 1, 7), fontsize=8, frameon=False)
+    fig.subplots_adjust(left=0.08, right=0.98, top=1 - 0.45 / fig.get_figheight(), bottom=0.06, hspace=0.12,
+                        wspace=0.25)
+    return fig
+
+
+def rank_figure(post: np.ndarray, ensemble_of_chain: np.ndarray, names, bins: int = 20) -> Figure:
+    """Rank plots: post (n_chain, n_draw, K); ranks over all kept samples, histogram per ensemble."""
+    k = len(names)
+    nr, nc = _grid(k, 5)
+    fig = new_figure(12, 2.0 * nr + 0.6)
+    axes = fig.subplots(nr, nc, squeeze=False).ravel()
+    ens = np.unique(ensemble_of_chain)
+    n_total = post.shape[0] * post.shape[1]
+    edges = np.linspace(0, n_total, bins + 1)
+    for j, name in enumerate(names):
+        ax = axes[j]
+        order = np.argsort(post[..., j].ravel(), kind="stable")
+        ranks = np.empty(order.size, dtype=np.int64)
+        ranks[order] = np.arange(order.size)
+        ranks = ranks.reshape(post.shape[:2])
+        for e in ens:
+            r = ranks[ensemble_of_chain == e].ravel()
+            h, _ = np.histogram(r, bins=edges)
+            frac = h / max(r.size, 1) * bins
+            ax.step(np.arange(bins + 1), np.r_[frac, frac[-1]], where="post",
+                    color=ENSEMBLE_COLORS[int(e) % len(ENSEMBLE_COLORS)], lw=1.0,
+                    label=f"ensemble {int(e)}" if j == 0 else None)
+        ax.axhline(1.0, color="k", lw=0.6, ls=":")
+        ax.set_ylim(0, max(2.0, ax.get_ylim()[1]))
+        ax.set_title(name, fontsize=9)
+        ax.set_xticks([])
+        ax.tick_params(labelsize=7)
+    for ax in axes[k:]:
+        ax.set_visible(False)
+    fig.legend(loc="upper center", ncol=min(len(ens), 6), fontsize=8, frameon=False)
+    fig.subplots_adjust(left=0.05, right=0.98, top=1 - 0.5 / fig.get_figheight(), bottom=0.04, hspace=0.35)
+    return fig
+
+
+# ---------------------------------------------------------------------------------------------- flights
+def residual_figure(sims) -> Figure:
+    """Measured − predicted marker coordinates (mm) against time: rows x, y, z; one column per flight."""
+    n = len(sims)
+    fig = new_figure(max(6.0, 3.2 * n), 6.5)
+    axes = fig.subplots(3, n, sharey="row", squeeze=False)
+    for c, s in enumerate(sims):
+        r = s.residuals * 1e3
+        for a in range(3):
+            ax = axes[a, c]
+            for m, mid in enumerate(s.marker_ids):
+                ax.plot(s.times, r[:, m, a], ".-", ms=2, lw=0.5, color=MARKER_COLORS[m % len(MARKER_COLORS)],
+                        label=f"marker {mid}" if (a == 0 and c == 0) else None)
+            ax.axhline(0, color="k", lw=0.5)
+            ax.tick_params(labelsize=7)
+            if c == 0:
+                ax.set_ylabel(f"{AXES[a]} residual [mm]", fontsize=9)
+            if a == 2:
+                ax.set_xlabel("t [s]", fontsize=9)
+        axes[0, c].set_title(f"{s.name}: RMS {s.rms * 1e3:.2f} mm", fontsize=10)
+    fig.legend(loc="upper center", ncol=len(sims[0].marker_ids), fontsize=8, frameon=False)
+    fig.subplots_adjust(left=0.07, right=0.98, top=0.88, bottom=0.08, hspace=0.15, wspace=0.12)
+    return fig
+
+
+def alpha_figure(sims, alpha_ref: list[np.ndarray], alpha_draws: list[np.ndarray]) -> Figure:
+    """Angle of attack (deg) against time per flight: reference draw and 90 % posterior band."""
+    n = len(sims)
+    fig = new_figure(max(6.0, 3.2 * n), 3.2)
+    axes = fig.subplots(1, n, sharey=True, squeeze=False)[0]
+    for c, s in enumerate(sims):
+        ax = axes[c]
+        a_ref = np.degrees(alpha_ref[c])
+        a_d = np.degrees(alpha_draws[c])
+        lo, hi = np.nanquantile(a_d, [0.05, 0.95], axis=0)
+        ax.fill_between(s.times, lo, hi, color="tab:blue", alpha=0.25, lw=0, label="90 % posterior band")
+        ax.plot(s.times, a_ref, color="tab:blue", lw=1.2, label="highest-posterior draw")
+        ax.set_title(f"{s.name}: α {np.nanmin(a_ref):.1f}…{np.nanmax(a_ref):.1f}°", fontsize=10)
+        ax.set_xlabel("t [s]", fontsize=9)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("angle of attack α [deg]", fontsize=9)
+    axes[0].legend(fontsize=7, loc="best")
+    fig.subplots_adjust(left=0.07, right=0.98, top=0.88, bottom=0.16, wspace=0.08)
+    return fig
+
+
+def trajectory_figure(sims) -> Figure:
+    """Measured markers (dots) and predicted marker paths (lines): top view (y against x), side view (z)."""
+    n = len(sims)
+    fig = new_figure(max(6.0, 3.2 * n), 5.6)
+    axes = fig.subplots(2, n, squeeze=False)
+    for c, s in enumerate(sims):
+        for row, a in enumerate((1, 2)):
+            ax = axes[row, c]
+            for m, mid in enumerate(s.marker_ids):
+                col = MARKER_COLORS[m % len(MARKER_COLORS)]
+                ax.plot(s.measured[:, m, 0], s.measured[:, m, a], ".", ms=2.5, color=col,
+                        label=f"marker {mid} measured" if (row == 0 and c == 0) else None)
+                ax.plot(s.ref_markers[:, m, 0], s.ref_markers[:, m, a], "-", lw=0.7, color=col,
+                        label=f"marker {mid} predicted" if (row == 0 and c == 0) else None)
+            ax.set_xlabel("x [m]", fontsize=9)
+            ax.set_ylabel(("y [m] (top view)", "z [m] (side view)")[row] if c == 0 else "", fontsize=9)
+            ax.tick_params(labelsize=7)
+            ax.grid(alpha=0.3)
+        axes[0, c].set_title(s.name, fontsize=10)
+    fig.legend(loc="upper center", ncol=len(sims[0].marker_ids), fontsize=7, frameon=False)
+    fig.subplots_adjust(left=0.1, right=0.98, top=0.84, bottom=0.09, hspace=0.3, wspace=0.22)
+    return fig
+
+
+def predictive_bands(sim, rng: np.random.Generator, mass: float = 0.9):
+    """Posterior predictive interval of measured − reference prediction, per time, marker and axis.
+
+    Replicates y_rep = markers(θ_draw) + σ_draw·ε; returns (lo, hi) arrays (n, m, 3) [m] and the share of
+    observed coordinates inside their own interval (≈ ``mass`` when the model and noise fit)."""
+    d = sim.draw_markers
+    ok = np.all(np.isfinite(d.reshape(d.shape[0], -1)), axis=1)
+    d, sig = d[ok], sim.sigma[ok]
+    rep = d + sig[:, None, None, None] * rng.standard_normal(d.shape)
+    dev = rep - sim.ref_markers[None]
+    q = (1 - mass) / 2
+    lo, hi = np.quantile(dev, [q, 1 - q], axis=0)
+    r = sim.residuals
+    seen = np.isfinite(r)
+    inside = (r >= lo) & (r <= hi) & seen
+    coverage = float(inside.sum() / max(seen.sum(), 1))
+    return lo, hi, coverage
+
+
+def predictive_figure(sims, bands) -> Figure:
+    """Measured − reference prediction (dots) inside the 90 % posterior predictive band (mean over markers)."""
+    n = len(sims)
+    fig = new_figure(max(6.0, 3.2 * n), 6.5)
+    axes = fig.subplots(3, n, sharey="row", squeeze=False)
+    for c, (s, (lo, hi, cov)) in enumerate(zip(sims, bands)):
+        r = s.residuals * 1e3
+        for a in range(3):
+            ax = axes[a, c]
+            ax.fill_between(s.times, lo[:, :, a].mean(axis=1) * 1e3, hi[:, :, a].mean(axis=1) * 1e3,
+                            color="0.6", alpha=0.45, lw=0, label="90 % predictive band" if a == 0 and c == 0 else None)
+            for m in range(r.shape[1]):
+                ax.plot(s.times, r[:, m, a], ".", ms=2, color=MARKER_COLORS[m % len(MARKER_COLORS)])
+            ax.tick_params(labelsize=7)
+            if c == 0:
+                ax.set_ylabel(f"{AXES[a]}: measured − predicted [mm]", fontsize=8)
+            if a == 2:
+                ax.set_xlabel("t [s]", fontsize=9)
+        axes[0, c].set_title(f"{s.name}: {cov * 100:.0f} % of points inside", fontsize=10)
+    fig.legend(loc="upper center", fontsize=8, frameon=False)
+    fig.subplots_adjust(left=0.08, right=0.98, top=0.88, bottom=0.08, hspace=0.15, wspace=0.12)
+    return fig
+
+
+# ---------------------------------------------------------------------------------------------- force curves
+def force_curve_figure(coef: dict, alpha_range_deg, tunnel, literature: dict, truth: dict | None) -> Figure:
+    """CL(α), CD(α), CM(α): posterior median and 90 % band over the flown α range, on the wind-tunnel points.
+
+    coef: {name: samples (N,)} for CL0 CLa CD0 CDa CM0 CMa; literature: {label: {name: value}}."""
+    lo_d, hi_d = alpha_range_deg
+    x_lo, x_hi = min(-15.0, lo_d - 10.0), max(50.0, hi_d + 10.0)
+    grid_deg = np.linspace(lo_d, hi_d, 80)
+    grid = np.radians(grid_deg)
+    full_deg = np.linspace(x_lo, x_hi, 120)
+    full = np.radians(full_deg)
+    curves = {
+        "CL": (lambda c, a: c["CL0"] + c["CLa"] * a, tunnel.CL),
+        "CD": (lambda c, a: c["CD0"] + c["CDa"] * a**2, tunnel.CD),
+        "CM": (lambda c, a: c["CM0"] + c["CMa"] * a, tunnel.CM),
+    }
+    fig = new_figure(12, 4.6)
+    axes = fig.subplots(1, 3)
+    keep = (tunnel.alpha_deg >= x_lo) & (tunnel.alpha_deg <= x_hi)
+    styles = [("--", "tab:green"), (":", "tab:purple"), ("-.", "tab:brown")]
+    for ax, (name, (fn, measured)) in zip(axes, curves.items()):
+        ax.plot(tunnel.alpha_deg[keep], measured[keep], "ks", ms=3.5, label="wind tunnel (Potts 2005)")
+        cs = {k: np.asarray(v)[:, None] for k, v in coef.items()}
+        q05, q50, q95 = np.quantile(fn(cs, grid[None, :]), [0.05, 0.5, 0.95], axis=0)
+        e05, e50, e95 = np.quantile(fn(cs, full[None, :]), [0.05, 0.5, 0.95], axis=0)
+        ax.fill_between(full_deg, e05, e95, color="tab:blue", alpha=0.10, lw=0,
+                        label="posterior 90 % band, extrapolated")
+        ax.plot(full_deg, e50, color="tab:blue", lw=0.7, alpha=0.6, ls=(0, (1, 2)))
+        ax.fill_between(grid_deg, q05, q95, color="tab:blue", alpha=0.45, lw=0,
+                        label="posterior 90 % band, flown α range")
+        ax.plot(grid_deg, q50, color="tab:blue", lw=2.0, label="posterior median")
+        for (label, vals_lit), (ls, col) in zip(literature.items(), styles):
+            if all(k in vals_lit for k in coef):
+                ax.plot(full_deg, fn(vals_lit, full), ls=ls, color=col, lw=1.0, label=label)
+        if truth is not None and all(k in truth for k in coef):
+            ax.plot(full_deg, fn(truth, full), color="tab:red", lw=0.9, ls=(0, (6, 3)), alpha=0.9, label="truth")
+        ax.axvspan(lo_d, hi_d, color="tab:blue", alpha=0.06)
+        ax.set_xlim(x_lo, x_hi)
+        ylo, yhi = np.nanmin(measured[keep]), np.nanmax(measured[keep])
+        pad = 0.15 * (yhi - ylo)
+        ax.set_ylim(min(ylo, np.nanmin(q05)) - pad, max(yhi, np.nanmax(q95)) + pad)
+        ax.set_xlabel("α [deg]", fontsize=9)
+        ax.set_ylabel(name, fontsize=10)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.3)
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="lower center", ncol=4, fontsize=8, frameon=False)
+    fig.subplots_adjust(left=0.06, right=0.99, top=0.96, bottom=0.27, wspace=0.25)
+    return fig

@@ -1,0 +1,285 @@
+"""`bayes-disc report`: a self-contained HTML report that parses, whose images decode and render in a real
+browser, with every section present and every figure written as PNG and PDF."""
+import base64
+import io
+import json
+import shutil
+import subprocess
+import time
+from html.parser import HTMLParser
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from bayes_disc.cli import main
+from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
+from bayes_disc.report import DEFAULT_SECTION_IDS, ReportInputError, Section, build_report, default_builders
+from bayes_disc.report.context import ReportContext, load_run
+from bayes_disc.report.html import render_document
+from bayes_disc.report.run import build_sections
+from bayes_disc.report.windtunnel import load_wind_tunnel
+
+CHROMIUM = "/usr/bin/chromium"
+FIGURES = ("corner", "trace", "ranks", "residuals", "angle_of_attack", "trajectories", "posterior_predictive",
+           "force_curves")
+CONFIG = """name: tiny
+flights:
+  - file: flights.csv
+markers:
+  "0": [0.100, 0.000, -0.015]
+  "1": [-0.0308, 0.0846, -0.015]
+  "2": [-0.0707, -0.0778, -0.015]
+prior: potts_crowther
+output: out
+truth: truth.json
+sampler: {ensembles: 2, max_steps: 60, adapt_steps: 20, check_every: 15, min_steps: 10, seed: 5}
+least_squares: {starts: 1}
+"""
+
+
+class _Doc(HTMLParser):
+    """Collects tags, ids, image sources, external references and open/close balance."""
+
+    def __init__(self):
+        super().__init__()
+        self.ids, self.imgs, self.external, self.stack, self.errors = [], [], [], [], []
+        self.section_ids, self.guides = [], 0
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        if "id" in a:
+            self.ids.append(a["id"])
+        if tag == "section":
+            self.section_ids.append(a.get("id"))
+        if tag == "p" and "guide" in (a.get("class") or ""):
+            self.guides += 1
+        if tag == "img":
+            self.imgs.append(a.get("src", ""))
+        for k in ("src", "href"):
+            v = a.get(k)
+            if v and not (v.startswith("#") or v.startswith("data:")):
+                self.external.append((tag, k, v))
+        if tag == "link" or (tag == "script" and "src" in a):
+            self.external.append((tag, "", str(a)))
+        if tag not in ("meta", "img", "br", "link", "input", "hr"):
+            self.stack.append(tag)
+
+    def handle_endtag(self, tag):
+        if not self.stack or self.stack[-1] != tag:
+            self.errors.append(f"unbalanced </{tag}> (open: {self.stack[-3:]})")
+            if tag in self.stack:
+                while self.stack and self.stack.pop() != tag:
+                    pass
+        else:
+            self.stack.pop()
+
+
+def _parse(text: str) -> _Doc:
+    d = _Doc()
+    d.feed(text)
+    d.close()
+    return d
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """A one-flight synthetic run (a few seconds of sampling) and its report."""
+    d = tmp_path_factory.mktemp("tiny")
+    f = LaunchSpec(name="short", speed=12.0, launch_angle_deg=4, alpha_deg=8, spin=55, duration=0.5,
+                   noise_mm=1.5, dropout=0.02)
+    write_synth(synthesize(SynthSpec(name="s", flights=(f,), seed=3)), d / "flights.csv", d / "truth.json")
+    (d / "config.yaml").write_text(CONFIG)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(d)  # `sample` may write reports/<name>.html in the working directory
+        assert main(["sample", str(d / "config.yaml"), "--no-progress"]) == 0
+    run_dir = d / "out"
+    t0 = time.perf_counter()
+    html_path = build_report(run_dir, reports_dir=d / "reports")
+    elapsed = time.perf_counter() - t0
+    return {"dir": d, "run": run_dir, "html": html_path, "text": html_path.read_text(encoding="utf-8"),
+            "seconds": elapsed}
+
+
+def test_report_written_where_expected_and_fast(tiny):
+    assert tiny["html"] == tiny["dir"] / "reports" / "tiny.html"
+    assert tiny["seconds"] < 30.0, tiny["seconds"]
+
+
+def test_html_parses_with_every_section_and_guide(tiny):
+    doc = _parse(tiny["text"])
+    assert not doc.errors, doc.errors[:5]
+    assert doc.stack == [], doc.stack
+    assert doc.section_ids == list(DEFAULT_SECTION_IDS)
+    assert doc.guides == len(DEFAULT_SECTION_IDS)
+    assert len(set(doc.ids)) == len(doc.ids), "duplicate element ids"
+
+
+def test_every_embedded_image_decodes(tiny):
+    doc = _parse(tiny["text"])
+    assert len(doc.imgs) == len(FIGURES)
+    for src in doc.imgs:
+        prefix = "data:image/png;base64,"
+        assert src.startswith(prefix), src[:40]
+        im = Image.open(io.BytesIO(base64.b64decode(src[len(prefix):], validate=True)))
+        im.load()
+        assert im.format == "PNG" and min(im.size) > 200, im.size
+        px = np.asarray(im.convert("L"), float)
+        assert px.std() > 5.0, "blank image"
+
+
+def test_self_contained(tiny):
+    doc = _parse(tiny["text"])
+    assert doc.external == []
+    assert "http://" not in tiny["text"].split("<body")[0] and "https://" not in tiny["text"].split("<body")[0]
+
+
+def test_figures_as_png_and_pdf(tiny):
+    fig_dir = tiny["run"] / "figures"
+    for name in FIGURES:
+        png, pdf = fig_dir / f"{name}.png", fig_dir / f"{name}.pdf"
+        assert png.is_file() and pdf.is_file(), name
+        Image.open(png).verify()
+        assert pdf.read_bytes()[:5] == b"%PDF-", name
+        assert pdf.stat().st_size > 5000, name
+
+
+def _section(text: str, sid: str) -> str:
+    start = text.index(f'<section id="{sid}">')
+    return text[start: text.index("</section>", start)]
+
+
+def test_content_of_key_sections(tiny):
+    text = tiny["text"]
+    summary = json.loads((tiny["run"] / "summary.json").read_text())
+    coef = _section(text, "coefficients")
+    for name in ["CL0", "CLa", "CD0", "CDa", "CM0", "CMa", "CMq", "CRr", "CRp", "CNr"]:
+        assert f"<td>{name}</td>" in coef, name
+    # literature (P&C 2000 and the paper's Table 2), truth column and the posterior median are shown
+    assert "Potts &amp; Crowther 2000" in coef and "Hummel &amp; Hubbard 2002 (Table 2)" in coef
+    assert ">2.96<" in coef and ">2.37" in coef and "<th>truth</th>" in coef
+    assert f"<td>{summary['parameters']['CLa']['q50']:.4g}</td>" in coef
+    assert "σ [mm]" in coef and "ωz [rad/s]" in coef
+    # a literature value far outside the interval is marked (CD0: P&C 0.08 against a truth of 0.15)
+    assert "0.08 ✗" in coef
+    assert "contours at 50 % and 90 % probability" in _section(text, "corner")
+    assert "R-hat" in _section(text, "convergence")
+    run = _section(text, "summary")
+    assert "flights.csv" in run and "potts_crowther" in run and "emcee" in run and "wall time" in run
+    assert "RMS" in _section(text, "residuals")
+    assert "Potts (2005)" in _section(text, "force-curves")
+
+
+def test_bad_run_folder_is_a_one_line_input_error(tmp_path, tiny, capsys):
+    with pytest.raises(ReportInputError, match="run folder not found"):
+        build_report(tmp_path / "nope")
+    (tmp_path / "a").mkdir()
+    with pytest.raises(ReportInputError, match="summary.json"):
+        build_report(tmp_path / "a")
+    (tmp_path / "a" / "summary.json").write_text("{not json")
+    with pytest.raises(ReportInputError, match="summary.json: not valid JSON"):
+        build_report(tmp_path / "a")
+    shutil.copy(tiny["run"] / "summary.json", tmp_path / "a" / "summary.json")
+    with pytest.raises(ReportInputError, match="posterior.nc"):
+        build_report(tmp_path / "a")
+    # the subcommand: exit status 2 and one line on stderr
+    import argparse
+    from bayes_disc.report.cli import register
+    parser = argparse.ArgumentParser()
+    register(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["report", str(tmp_path / "a"), "--reports-dir", str(tmp_path / "r")])
+    assert args.func(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "posterior.nc" in err[0]
+
+
+def test_changed_data_is_refused(tiny, tmp_path):
+    """The report rebuilds the model from the run's config: data edited since the run must not pass silently."""
+    d = tmp_path / "copy"
+    shutil.copytree(tiny["dir"], d, ignore=shutil.ignore_patterns("figures", "reports", "chains"))
+    s = json.loads((d / "out/summary.json").read_text())
+    s["config"] = str(d / "config.yaml")
+    (d / "out/summary.json").write_text(json.dumps(s))
+    lines = (d / "flights.csv").read_text().splitlines()
+    (d / "flights.csv").write_text("\n".join(lines[:-30]) + "\n")
+    with pytest.raises(ReportInputError, match="differ from the run's summary.json"):
+        build_report(d / "out", reports_dir=tmp_path / "r")
+
+
+def test_later_capabilities_slot_in_as_sections(tiny, tmp_path):
+    run = load_run(tiny["run"])
+    run.extras["identifiability"] = {"CLa": {"verdict": "identified", "reason": "sd 3 % of the prior's"}}
+    ctx = ReportContext(run, tmp_path / "figs")
+    from bayes_disc.report import content
+
+    def extra(c):
+        return Section("extra-capability", "Extra", "A later capability's section.", "<p>hello</p>")
+    secs = build_sections(ctx, [content.identifiability_section, extra])
+    assert [s.id for s in secs] == ["identifiability", "extra-capability"]
+    assert "identified" in secs[0].html and "sd 3 %" in secs[0].html
+    doc = _parse(render_document("t", "s", secs))
+    assert doc.section_ids == ["identifiability", "extra-capability"] and not doc.errors
+    assert len(default_builders()) == len(DEFAULT_SECTION_IDS)
+    with pytest.raises(ValueError, match="duplicate"):
+        build_sections(ctx, [extra, extra])
+
+
+def test_wind_tunnel_table_is_packaged():
+    t = load_wind_tunnel()
+    assert t.alpha_deg[0] == -100 and t.alpha_deg[-1] == 100 and t.alpha_deg.size == 41
+    assert "Potts" in t.citation and "Manchester" in t.citation
+    i = int(np.flatnonzero(t.alpha_deg == 0)[0])
+    assert (t.CL[i], t.CD[i], t.CM[i]) == (0.11852, 0.09367, -0.00699)
+
+
+# ---------------------------------------------------------------------------------------------- browser
+def _chromium(tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
+    assert Path(CHROMIUM).is_file(), f"{CHROMIUM} missing: install Debian's chromium (CI: apt-get install chromium)"
+    profile = tmp_path / f"profile{len(list(tmp_path.glob('profile*')))}"
+    profile.mkdir()
+    cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+           "--disable-background-networking", "--disable-component-update", "--disable-sync",
+           "--disable-dev-shm-usage", f"--user-data-dir={profile}", "--virtual-time-budget=10000", *args]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+
+
+def _body_attrs(dom: str) -> dict:
+    start = dom.index("<body")
+    tag = dom[start: dom.index(">", start) + 1]
+    doc = _Doc()
+    out = {}
+
+    def grab(t, attrs):
+        out.update(dict(attrs))
+    doc.handle_starttag = grab
+    doc.feed(tag)
+    return out
+
+
+def test_renders_in_headless_chromium_without_broken_images(tiny, tmp_path):
+    url = tiny["html"].resolve().as_uri()
+    r = _chromium(tmp_path, "--dump-dom", url)
+    assert r.returncode == 0, r.stderr[-2000:]
+    body = _body_attrs(r.stdout)
+    assert body.get("data-render-check") == "done", body
+    assert body.get("data-images") == str(len(FIGURES)), body
+    assert body.get("data-broken-images") == "0", body
+    shot = tmp_path / "shot.png"
+    r = _chromium(tmp_path, f"--screenshot={shot}", "--window-size=1200,3000", "--hide-scrollbars", url)
+    assert r.returncode == 0 and shot.is_file(), r.stderr[-2000:]
+    im = Image.open(shot)
+    assert im.size == (1200, 3000)
+    px = np.asarray(im.convert("L"), float)
+    assert px.std() > 10 and (px < 128).mean() > 0.01, "page looks blank"
+
+
+def test_browser_check_detects_a_broken_image(tiny, tmp_path):
+    """Negative control: the same check reports a corrupted image."""
+    text = tiny["text"]
+    i = text.index("data:image/png;base64,") + len("data:image/png;base64,")
+    bad = tmp_path / "broken.html"
+    bad.write_text(text[:i] + "AAAA" + text[i + 4:], encoding="utf-8")
+    r = _chromium(tmp_path, "--dump-dom", bad.resolve().as_uri())
+    assert r.returncode == 0, r.stderr[-2000:]
+    assert _body_attrs(r.stdout).get("data-broken-images") == "1"

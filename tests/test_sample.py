@@ -1,0 +1,133 @@
+"""`bayes-disc sample`: determinism, resume, recovery of the truth, and the paper's narrow-α finding."""
+import json
+import shutil
+from pathlib import Path
+
+import arviz as az
+import numpy as np
+import pytest
+
+from bayes_disc.cli import main
+from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
+
+from conftest import REPO
+
+MARKERS_YAML = """markers:
+  "0": [0.100, 0.000, -0.015]
+  "1": [-0.0308, 0.0846, -0.015]
+  "2": [-0.0707, -0.0778, -0.015]
+"""
+
+
+@pytest.fixture(autouse=True)
+def _in_tmp(tmp_path, monkeypatch):
+    """`sample` writes reports/<name>.html relative to the working directory: keep it out of the repo."""
+    monkeypatch.chdir(tmp_path)
+
+
+def _write_config(folder: Path, name: str, sampler: str, extra: str = "") -> Path:
+    cfg = folder / "config.yaml"
+    cfg.write_text(f"name: {name}\nflights:\n  - file: flights.csv\n{MARKERS_YAML}prior: potts_crowther\n"
+                   f"output: out\ntruth: truth.json\n{sampler}\n{extra}")
+    return cfg
+
+
+def _small_data(folder: Path, seed=3):
+    f = LaunchSpec(name="short", speed=12.0, launch_angle_deg=4, alpha_deg=8, spin=55, duration=0.5,
+                   noise_mm=1.5, dropout=0.02)
+    write_synth(synthesize(SynthSpec(name="s", flights=(f,), seed=seed)), folder / "flights.csv",
+                folder / "truth.json")
+
+
+SMALL_SAMPLER = ("sampler: {ensembles: 2, max_steps: 60, adapt_steps: 15, check_every: 15, min_steps: 10, "
+                 "seed: 5}\nleast_squares: {starts: 1}")
+
+
+def test_same_seed_same_summary_and_outputs(tmp_path):
+    runs = []
+    for k in range(2):
+        d = tmp_path / f"r{k}"
+        d.mkdir()
+        _small_data(d)
+        cfg = _write_config(d, "det", SMALL_SAMPLER)
+        assert main(["sample", str(cfg), "--no-progress"]) == 0
+        runs.append(d / "out")
+    a = json.loads((runs[0] / "summary.json").read_text())
+    b = json.loads((runs[1] / "summary.json").read_text())
+    a.pop("config"), b.pop("config")
+    for f in a["flights"]:
+        a["flights"][f].pop("file"), b["flights"][f].pop("file")
+    assert a == b
+    # SPEC §6 keys for every coefficient and the flight's σ
+    for name in ["CL0", "CLa", "CD0", "CDa", "CM0", "CMa", "CMq", "CRr", "CRp", "CNr", "sigma_short"]:
+        assert set(a["parameters"][name]) >= {"mean", "sd", "q05", "q50", "q95", "r_hat", "ess_bulk"}
+    idata = az.from_netcdf(str(runs[0] / "posterior.nc"))
+    assert {"posterior", "sample_stats", "prior", "observed_data"} <= set(idata.groups())
+    assert "CLa" in idata.posterior and "sigma_short" in idata.prior
+
+
+def test_resume_continues_without_losing_samples(tmp_path):
+    _small_data(tmp_path)
+    cfg = _write_config(tmp_path, "res", SMALL_SAMPLER.replace("max_steps: 60", "max_steps: 45"))
+    assert main(["sample", str(cfg), "--no-progress"]) == 0
+    import emcee
+    first = emcee.backends.HDFBackend(str(tmp_path / "out/chains/ensemble_0.h5"), read_only=True).get_chain()
+    cfg.write_text(cfg.read_text().replace("max_steps: 45", "max_steps: 75"))
+    assert main(["sample", str(cfg), "--no-progress", "--resume"]) == 0
+    second = emcee.backends.HDFBackend(str(tmp_path / "out/chains/ensemble_0.h5"), read_only=True).get_chain()
+    assert second.shape[0] == 75
+    np.testing.assert_array_equal(second[:45], first)
+
+
+# ---------------------------------------------------------------------------------------------- slow
+def _demo_like(folder: Path, seed: int, names=None):
+    """Four flights like the demo (Hummel 2002 coefficients, 1–3 mm noise per flight, 2 % dropped)."""
+    text = (REPO / "runs/demo/synth.yaml").read_text().replace("seed: 2002", f"seed: {seed}")
+    (folder / "synth.yaml").write_text(text)
+    assert main(["synth", str(folder / "synth.yaml")]) == 0
+    if names is not None:
+        import csv
+        rows = list(csv.reader((folder / "flights.csv").open()))
+        with (folder / "flights.csv").open("w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(rows[0])
+            w.writerows(r for r in rows[1:] if r[0] in names)
+
+
+@pytest.fixture(scope="module")
+def four_flights(tmp_path_factory):
+    d = tmp_path_factory.mktemp("four")
+    _demo_like(d, seed=11)
+    cfg = _write_config(d, "four", "sampler: {seed: 2}")
+    mp = pytest.MonkeyPatch()
+    mp.chdir(d)
+    try:
+        assert main(["sample", str(cfg), "--no-progress"]) == 0
+    finally:
+        mp.undo()
+    assert (d / "reports/four.html").is_file()
+    return json.loads((d / "out/summary.json").read_text()), json.loads((d / "truth.json").read_text())
+
+
+@pytest.mark.slow
+def test_recovery_four_flights(four_flights):
+    summary, truth = four_flights
+    p = summary["parameters"]
+    for name, value in truth["coefficients"].items():
+        assert p[name]["q025"] <= value <= p[name]["q975"], (name, value, p[name])
+    for f, t in truth["flights"].items():
+        assert p[f"sigma_{f}"]["q50"] == pytest.approx(t["noise_m"], rel=0.15)
+    assert summary["convergence"]["r_hat_max"] < 1.01
+    assert summary["convergence"]["converged"]
+
+
+@pytest.mark.slow
+def test_single_narrow_flight_is_much_less_informative(four_flights, tmp_path):
+    summary4, _ = four_flights
+    _demo_like(tmp_path, seed=11, names={"fffl10"})
+    cfg = _write_config(tmp_path, "narrow", "sampler: {seed: 2}")
+    assert main(["sample", str(cfg), "--no-progress"]) == 0
+    summary1 = json.loads((tmp_path / "out/summary.json").read_text())
+    for name in ("CLa", "CDa", "CMa"):
+        ratio = summary1["parameters"][name]["sd"] / summary4["parameters"][name]["sd"]
+        assert ratio > 3.0, (name, ratio)
