@@ -87,7 +87,9 @@ def load_run(run_dir) -> RunData:
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            idata = az.from_netcdf(str(pp))
+            # eager: a lazily opened file would stay open and block the next `sample` from rewriting it
+            with az.rc_context({"data.load": "eager"}):
+                idata = az.from_netcdf(str(pp))
     except Exception as e:  # netCDF/HDF errors come in many types
         raise ReportInputError(pp, f"cannot read as ArviZ InferenceData ({type(e).__name__}: {e})") from None
     if "posterior" not in idata.groups():
