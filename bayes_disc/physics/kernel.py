@@ -7,15 +7,16 @@ width is used, and from run to run.
 
 Layout (why it is fast)
 -----------------------
-Lanes are processed in groups of ``lanes`` (8 = two AVX2 registers of float64 for batches, 4 for
-batches of at most 4 lanes). A group's state, scaled coefficients, step sizes and term parameters live in
+Lanes are processed in groups of ``lanes`` (8 for batches, 4 for batches of at most 4 lanes; an AVX2
+register holds 4 float64). A group's state, scaled coefficients, step sizes and term parameters live in
 one flat workspace array, one row of ``lanes`` doubles per quantity, at offsets that are compile-time
 constants. The Runge–Kutta step is generated from its Butcher tableau as straight-line code (stages
 unrolled, the 13-component stage vectors held in tuples, i.e. registers) and the right-hand side,
 with the terms' hooks, is inlined into it (LLVM ``alwaysinline``). The loop over a group's lanes is then
 one branch-free block that LLVM vectorises (``<4 x double>``); the constant offsets let it prove that
-the lanes' loads and stores do not alias, so no runtime checks are needed. Per-lane bookkeeping (rates,
-health checks) is vectorised the same way.
+the lanes' loads and stores do not alias, so no runtime checks are needed. Groups of 8 step their two
+halves side by side, stage by stage (two independent dependency chains for the out-of-order core).
+Per-lane bookkeeping (rates, health checks) is vectorised the same way.
 
 Equations (body-axis form of :func:`.equations.state_derivative`)
 -----------------------------------------------------------------
@@ -25,10 +26,11 @@ the in-plane air speed V∥ = √(u² + v²), the air speed V = |u_B|, Q = ρV²
 d1 = (u, v, 0)/V∥, d2 = b3 × d1 = (−d1y, d1x, 0), d3 = b3 = (0, 0, 1):
 
     α = atan2(w, V∥),   p = ω_B·d1,   q = ω_B·d2,   r = ω_z
-    m dv_W/dt = R [ (CL0 + CLa α) (ρAV/2) (d2 × u_B) − (CD0 + CDa α²) (ρAV/2) u_B ] − m g ẑ,
-                 with d2 × u_B = (d1x w, d1y w, −V∥)
+    m dv_W/dt = (CL0 + CLa α) (ρAV/2) (d2 × v_a) − (CD0 + CDa α²) (ρAV/2) v_a − m g ẑ,
+                 with d2 × v_a = (w/V∥)(v_a − w b3) − V∥ b3 in world axes
     M_B = [(CRr r + CRp p) d1 + (CM0 + CMa α + CMq q) d2 + CNr r d3] Q A d
-    dω_x/dt = M_x/Id + (Id − Ia)/Id · ω_y ω_z,   dω_y/dt = M_y/Id − (Id − Ia)/Id · ω_z ω_x,   dω_z/dt = M_z/Ia
+    dω_x/dt = M_x/Id + (Id − Ia)/Id · ω_y ω_z,   dω_y/dt = M_y/Id − (Id − Ia)/Id · ω_z ω_x,
+    dω_z/dt = M_z/Ia
     dq/dt = ½ q ⊗ (0, ω_B)
 
 The coefficients are pre-multiplied once per lane by ρA/2m (CL*, CD*), ρAd/2Id (CM*, CR*) or ρAd/2Ia
@@ -47,17 +49,21 @@ equal substeps, ω_c being the lane's fastest physical rate at the segment start
 [rad/s] with V' = √(|v|² + 1 m²/s²), Q' = ρV'²/2: spin, nutation (Ia/Id)·r ≈ 1.93 r, pitch stiffness,
 rate damping, flight-path turning. With ``fixed_rate`` > 0 every lane uses ω_c = fixed_rate instead, a
 parameter-independent schedule (results smooth in the parameters), and lanes whose own ω_c exceeds
-rate_margin · fixed_rate are flagged. The default c = 1.7 gives one Verner step per 120-Hz sample up to
-ω_c ≈ 204 rad/s (spin r ≈ 105 rad/s); measured marker errors over 2 s are ≲ 1e-7 m on the SPEC reference
-cases and ≲ 3e-6 m for r = 100 rad/s throws with strong wobble (``benchmarks/bench_simulator.py``).
+rate_margin · fixed_rate are flagged. The step count is per lane (not shared with other lanes).
+
+The default c = 1.7 gives one Verner step per 120-Hz sample up to ω_c ≈ 204 rad/s (spin r ≈ 105 rad/s).
+Marker errors measured when this was written: ≤ 1e-7 m on the four SPEC reference cases (reported by
+``benchmarks/bench_simulator.py``); 0.6–2.4e-6 m over 2 s for r = 100 rad/s throws with wobble rates up
+to 25 rad/s, against a DOP853 run at c = 0.3. (Butcher's rk6 needs two substeps per 120-Hz sample to
+stay below 1e-6 m on the reference cases: 14 right-hand sides per sample instead of 9.)
 
 Failures
 --------
 Lanes that leave the rated envelope (ω_c above the cap or NaN — any NaN/inf in the state or the
-coefficients —, non-finite state, |v| above ``speed_cap``, |x| + |y| + |z| above 1e5 m) are flagged with
-a status code, parked on their initial state and frozen (no further substeps) so the rest of the batch
-goes on; their outputs are NaN. The work per lane is bounded by duration · cap / c substeps, so wild
-parameters return promptly.
+coefficients —, more than ``MAX_SUBSTEPS`` substeps in a segment, non-finite state, |v| above
+``speed_cap``, |x| + |y| + |z| above 1e5 m) are flagged with a status code, parked on their initial state
+and frozen (no further substeps) so the rest of the batch goes on; their outputs are NaN. The work per
+lane is bounded by duration · cap / c substeps, so wild parameters return promptly.
 """
 from __future__ import annotations
 
@@ -74,6 +80,8 @@ LANES = 8
 LANES_SMALL = 4
 #: longest stretch [s] integrated on one step-size decision (the rate is re-evaluated at least this often)
 SEGMENT_MAX = 0.05
+#: a lane needing more substeps than this in one segment is flagged (guards absurd caps and fixed rates)
+MAX_SUBSTEPS = 100_000
 #: LLVM fast-math flags of the integrator: FMA contraction, reciprocal and signed-zero freedom. Not
 #: 'nnan'/'ninf': NaN and infinity detection is how failing lanes are found.
 FASTMATH = {"contract", "arcp", "nsz"}
@@ -220,28 +228,37 @@ DEFAULT_STEP_FACTOR = {"vern7": 1.7, "dop853": 2.2, "rk6": 0.8, "rk4": 0.25}
 DEFAULT_METHOD = "vern7"
 
 
-def step_source(A, b, c, n=13) -> str:
-    """Python source of ``rk_step(t, h, y, cf, E, lane, kd)``: one explicit RK step of the tableau
-    (A, b, c) for an n-tuple y, stages unrolled, zero coefficients dropped; calls ``rhs``. The products
-    h·a_ij are formed once per step, so every stage value is a chain of fused multiply-adds."""
+def step_source(A, b, c, n=13, P=1) -> str:
+    """Python source of ``rk_step(ts, hs, ys, cfs, lanes, E, kd)``: one explicit RK step of the tableau
+    (A, b, c) for P independent lanes (P-tuples of times, steps, n-tuple states, coefficient tuples and
+    lane indices); returns the P new states. Stages are unrolled and zero coefficients dropped; the
+    products h·a_ij are formed once per step, so every stage value is a chain of fused multiply-adds.
+    The P lanes' stages are interleaved (stage i of every lane, then stage i + 1): independent
+    dependency chains side by side, which the out-of-order core overlaps. Calls ``rhs``."""
     ns = len(b)
-    lines = ["def rk_step(t, h, y, cf, E, lane, kd):",
-             f'    """One step of a {ns}-stage explicit Runge–Kutta method (generated by kernel.step_source)."""']
+    lines = ["def rk_step(ts, hs, ys, cfs, lanes, E, kd):",
+             f'    """{ns}-stage explicit Runge–Kutta step of {P} lane(s) (generated by kernel.step_source)."""']
+    for p in range(P):
+        lines.append(f"    t{p}, h{p}, y{p}, cf{p}, lane{p} = ts[{p}], hs[{p}], ys[{p}], cfs[{p}], lanes[{p}]")
+        for i in range(ns):
+            lines += [f"    a{p}_{i}_{j} = h{p} * {float(A[i, j])!r}" for j in range(i) if A[i, j] != 0.0]
+        lines += [f"    b{p}_{j} = h{p} * {float(b[j])!r}" for j in range(ns) if b[j] != 0.0]
     for i in range(ns):
-        lines += [f"    a{i}_{j} = h * {float(A[i, j])!r}" for j in range(i) if A[i, j] != 0.0]
-    lines += [f"    b{j} = h * {float(b[j])!r}" for j in range(ns) if b[j] != 0.0]
-    for i in range(ns):
-        if i == 0:
-            arg = "y"
-        else:
-            comps = [" + ".join([f"y[{m}]"] + [f"a{i}_{j} * k{j}[{m}]" for j in range(i) if A[i, j] != 0.0])
-                     for m in range(n)]
-            lines.append(f"    s = ({', '.join(comps)},)")
-            arg = "s"
-        lines.append(f"    k{i} = rhs(t + {float(c[i])!r} * h, {arg}, cf, E, lane, kd)")
-    comps = [" + ".join([f"y[{m}]"] + [f"b{j} * k{j}[{m}]" for j in range(ns) if b[j] != 0.0])
-             for m in range(n)]
-    lines.append(f"    return ({', '.join(comps)},)")
+        for p in range(P):
+            if i == 0:
+                arg = f"y{p}"
+            else:
+                comps = [" + ".join([f"y{p}[{m}]"] + [f"a{p}_{i}_{j} * k{p}_{j}[{m}]" for j in range(i)
+                                                      if A[i, j] != 0.0]) for m in range(n)]
+                lines.append(f"    s{p} = ({', '.join(comps)},)")
+                arg = f"s{p}"
+            lines.append(f"    k{p}_{i} = rhs(t{p} + {float(c[i])!r} * h{p}, {arg}, cf{p}, E, lane{p}, kd)")
+    outs = []
+    for p in range(P):
+        comps = [" + ".join([f"y{p}[{m}]"] + [f"b{p}_{j} * k{p}_{j}[{m}]" for j in range(ns) if b[j] != 0.0])
+                 for m in range(n)]
+        outs.append(f"({', '.join(comps)},)")
+    lines.append(f"    return ({', '.join(outs)},)")
     return "\n".join(lines)
 
 
@@ -301,11 +318,14 @@ _ROW_E = 31         # term parameters
 
 
 def _make_kernel(terms: tuple[Term, ...], method: str, lanes: int):
+    """Build (not yet compile) the integrator for these terms, method and group width; groups of 8 or
+    more lanes step two half-groups side by side (P = 2)."""
     air, extra_loads = _chains(terms)
     has_air = any(t.air is not None for t in terms)
     has_loads = any(t.loads is not None for t in terms)
     NE = sum(len(t.parameters) for t in terms)
     L = lanes
+    P = 2 if L >= 8 and L % 8 == 0 else 1
     NW = (_ROW_E + max(NE, 1)) * L
     oS, oC, oH, oT, oN = _ROW_S * L, _ROW_C * L, _ROW_H * L, _ROW_T * L, _ROW_N * L
     oK, oR, oX, oE = _ROW_K * L, _ROW_R * L, _ROW_X * L, _ROW_E * L
@@ -347,21 +367,21 @@ def _make_kernel(terms: tuple[Term, ...], method: str, lanes: int):
         d1x, d1y = ub * ivp, vb * ivp                       # d1 (body); d2 = (−d1y, d1x, 0)
         p = ox * d1x + oy * d1y
         q = oy * d1x - ox * d1y
-        # specific lift along d2 × u_B = (d1x w, d1y w, −V∥) and drag along −u_B  [m/s²]
+        # specific lift (CL0 + CLa α) ρAV/2m along d2 × v_a = (w/V∥)(v_a − w b3) − V∥ b3 (world) and drag
+        # (CD0 + CDa α²) ρAV/2m along −v_a:  dv/dt = (lift w/V∥ − drag) v_a − lift (V²/V∥) b3 − g ẑ
         lift = (cf[0] + cf[1] * alpha) * sp
         drag = (cf[2] + cf[3] * alpha * alpha) * sp
-        fx = lift * (d1x * wb) - drag * ub
-        fy = lift * (d1y * wb) - drag * vb
-        fz = -lift * vpar - drag * wb
+        fa = lift * wb * ivp - drag
+        fb = lift * sp2 * ivp
         # moments / inertia [rad/s²]: roll about d1, pitch about d2, spin-down about b3
         roll = (cf[7] * oz + cf[8] * p) * sp2
         pitch = (cf[4] + cf[5] * alpha + cf[6] * q) * sp2
         mx = roll * d1x - pitch * d1y
         my = roll * d1y + pitch * d1x
         mz = cf[9] * oz * sp2
-        dvx = r00 * fx + r01 * fy + r02 * fz
-        dvy = r10 * fx + r11 * fy + r12 * fz
-        dvz = r20 * fx + r21 * fy + r22 * fz - g
+        dvx = fa * ax - fb * r02
+        dvy = fa * ay - fb * r12
+        dvz = fa * az - fb * r22 - g
         if has_loads:
             # the flight context of terms.py (world axes) and the terms' world-frame loads
             D1x, D1y, D1z = r00 * d1x + r01 * d1y, r10 * d1x + r11 * d1y, r20 * d1x + r21 * d1y
@@ -376,49 +396,75 @@ def _make_kernel(terms: tuple[Term, ...], method: str, lanes: int):
             my += (r01 * e[3] + r11 * e[4] + r21 * e[5]) * inv_Id
             mz += (r02 * e[3] + r12 * e[4] + r22 * e[5]) * inv_Ia
         hx, hy, hz = 0.5 * ox, 0.5 * oy, 0.5 * oz
+        gz = gyro * oz                                      # (Id − Ia)/Id · ω_z
         return (vx, vy, vz, dvx, dvy, dvz,
                 -qx * hx - qy * hy - qz * hz,
                 qw * hx + qy * hz - qz * hy,
                 qw * hy - qx * hz + qz * hx,
                 qw * hz + qx * hy - qy * hx,
-                mx + gyro * oy * oz,
-                my - gyro * oz * ox,
+                mx + gz * oy,
+                my - gz * ox,
                 mz)
 
     A_rk, b_rk, c_rk = TABLEAUX[method]
     namespace = {"rhs": rhs}
-    exec(step_source(A_rk, b_rk, c_rk), namespace)
+    exec(step_source(A_rk, b_rk, c_rk, P=P), namespace)
     rk_step = nb.njit(forceinline=True, error_model="numpy", fastmath=FASTMATH)(namespace["rk_step"])
+
+    @nb.njit(forceinline=True, error_model="numpy", fastmath=FASTMATH)
+    def load_lane(W, b):
+        """(state, scaled coefficients) of lane b."""
+        y = (W[oS + 0 * L + b], W[oS + 1 * L + b], W[oS + 2 * L + b], W[oS + 3 * L + b],
+             W[oS + 4 * L + b], W[oS + 5 * L + b], W[oS + 6 * L + b], W[oS + 7 * L + b],
+             W[oS + 8 * L + b], W[oS + 9 * L + b], W[oS + 10 * L + b], W[oS + 11 * L + b],
+             W[oS + 12 * L + b])
+        cf = (W[oC + 0 * L + b], W[oC + 1 * L + b], W[oC + 2 * L + b], W[oC + 3 * L + b],
+              W[oC + 4 * L + b], W[oC + 5 * L + b], W[oC + 6 * L + b], W[oC + 7 * L + b],
+              W[oC + 8 * L + b], W[oC + 9 * L + b])
+        return y, cf
+
+    @nb.njit(forceinline=True, error_model="numpy", fastmath=FASTMATH)
+    def store_lane(W, b, y, yn, sub):
+        """Lane b takes the stepped state yn (quaternion renormalised) if sub < its substep count,
+        else keeps y (branch-free)."""
+        nq = 1.0 / math.sqrt(yn[6] * yn[6] + yn[7] * yn[7] + yn[8] * yn[8] + yn[9] * yn[9])
+        act = sub < W[oN + b]
+        W[oS + 0 * L + b] = yn[0] if act else y[0]
+        W[oS + 1 * L + b] = yn[1] if act else y[1]
+        W[oS + 2 * L + b] = yn[2] if act else y[2]
+        W[oS + 3 * L + b] = yn[3] if act else y[3]
+        W[oS + 4 * L + b] = yn[4] if act else y[4]
+        W[oS + 5 * L + b] = yn[5] if act else y[5]
+        W[oS + 6 * L + b] = yn[6] * nq if act else y[6]
+        W[oS + 7 * L + b] = yn[7] * nq if act else y[7]
+        W[oS + 8 * L + b] = yn[8] * nq if act else y[8]
+        W[oS + 9 * L + b] = yn[9] * nq if act else y[9]
+        W[oS + 10 * L + b] = yn[10] if act else y[10]
+        W[oS + 11 * L + b] = yn[11] if act else y[11]
+        W[oS + 12 * L + b] = yn[12] if act else y[12]
+
+    HALF = L // 2
 
     @nb.njit(forceinline=True, error_model="numpy", fastmath=FASTMATH)
     def group_substep(W, E, kd, sub):
         """Substep number ``sub`` of the segment for every lane of the group; lanes with sub ≥ n keep
-        their state. The quaternion is renormalised after the step. Branch-free over the lanes."""
-        for b in range(L):
-            y = (W[oS + 0 * L + b], W[oS + 1 * L + b], W[oS + 2 * L + b], W[oS + 3 * L + b],
-                 W[oS + 4 * L + b], W[oS + 5 * L + b], W[oS + 6 * L + b], W[oS + 7 * L + b],
-                 W[oS + 8 * L + b], W[oS + 9 * L + b], W[oS + 10 * L + b], W[oS + 11 * L + b],
-                 W[oS + 12 * L + b])
-            cf = (W[oC + 0 * L + b], W[oC + 1 * L + b], W[oC + 2 * L + b], W[oC + 3 * L + b],
-                  W[oC + 4 * L + b], W[oC + 5 * L + b], W[oC + 6 * L + b], W[oC + 7 * L + b],
-                  W[oC + 8 * L + b], W[oC + 9 * L + b])
-            h = W[oH + b]
-            yn = rk_step(W[oT + b] + sub * h, h, y, cf, E, b, kd)
-            nq = 1.0 / math.sqrt(yn[6] * yn[6] + yn[7] * yn[7] + yn[8] * yn[8] + yn[9] * yn[9])
-            act = sub < W[oN + b]
-            W[oS + 0 * L + b] = yn[0] if act else y[0]
-            W[oS + 1 * L + b] = yn[1] if act else y[1]
-            W[oS + 2 * L + b] = yn[2] if act else y[2]
-            W[oS + 3 * L + b] = yn[3] if act else y[3]
-            W[oS + 4 * L + b] = yn[4] if act else y[4]
-            W[oS + 5 * L + b] = yn[5] if act else y[5]
-            W[oS + 6 * L + b] = yn[6] * nq if act else y[6]
-            W[oS + 7 * L + b] = yn[7] * nq if act else y[7]
-            W[oS + 8 * L + b] = yn[8] * nq if act else y[8]
-            W[oS + 9 * L + b] = yn[9] * nq if act else y[9]
-            W[oS + 10 * L + b] = yn[10] if act else y[10]
-            W[oS + 11 * L + b] = yn[11] if act else y[11]
-            W[oS + 12 * L + b] = yn[12] if act else y[12]
+        their state. Vectorised over the lanes; with P = 2 lanes b and b + L/2 are stepped together."""
+        if P == 1:
+            for b in range(L):
+                y, cf = load_lane(W, b)
+                h = W[oH + b]
+                (yn,) = rk_step((W[oT + b] + sub * h,), (h,), (y,), (cf,), (b,), E, kd)
+                store_lane(W, b, y, yn, sub)
+        else:
+            for b in range(HALF):
+                c2 = b + HALF
+                y, cf = load_lane(W, b)
+                y2, cf2 = load_lane(W, c2)
+                h, h2 = W[oH + b], W[oH + c2]
+                yn, yn2 = rk_step((W[oT + b] + sub * h, W[oT + c2] + sub * h2), (h, h2), (y, y2), (cf, cf2),
+                                  (b, c2), E, kd)
+                store_lane(W, b, y, yn, sub)
+                store_lane(W, c2, y2, yn2, sub)
 
     @nb.njit(forceinline=True, error_model="numpy", fastmath=FASTMATH)
     def group_rates(W, nutation):
@@ -515,12 +561,12 @@ def _make_kernel(terms: tuple[Term, ...], method: str, lanes: int):
                             if status[g0 + b] != STATUS_OK:
                                 continue
                             rate = W[oR + b]
-                            if not (rate <= cap):
+                            w = fixed_rate if fixed_rate > 0.0 else rate
+                            if not (rate <= cap and Tseg * w <= MAX_SUBSTEPS * step_factor):
                                 status[g0 + b] = STATUS_RATE
                                 for j in range(13):       # park the lane on harmless numbers
                                     W[oS + j * L + b] = Y0[b, j]
                                 continue
-                            w = fixed_rate if fixed_rate > 0.0 else rate
                             nsub = max(1, int(math.ceil(Tseg * w / step_factor)))
                             W[oN + b] = nsub
                             W[oH + b] = Tseg / nsub

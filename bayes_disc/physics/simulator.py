@@ -40,6 +40,17 @@ class SimulatorSettings:
     def __post_init__(self):
         if self.method not in TABLEAUX:
             raise ValueError(f"unknown integration method {self.method!r}; known: {sorted(TABLEAUX)}")
+        # the kernel's work is bounded by duration · cap / c substeps: keep every factor finite and positive
+        if self.step_factor is not None and not (np.isfinite(self.step_factor) and self.step_factor > 0):
+            raise ValueError(f"simulator step_factor must be a positive finite number or None, got "
+                             f"{self.step_factor!r}")
+        if self.fixed_rate is not None and not (np.isfinite(self.fixed_rate) and self.fixed_rate >= 0):
+            raise ValueError(f"simulator fixed_rate must be a finite number ≥ 0 (0 or None: off), got "
+                             f"{self.fixed_rate!r}")
+        for name in ("omega_cap", "speed_cap", "rate_margin"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"simulator {name} must be a positive finite number, got {value!r}")
 
     @property
     def c(self) -> float:
