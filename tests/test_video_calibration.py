@@ -91,6 +91,20 @@ def test_dlt_minimum_six_points_and_residual_statistics(rng):
     assert "leave-one-out" in r.report()
 
 
+def test_leave_one_out_residual_exposes_a_misdigitised_point(rng):
+    """A control point digitised 4 px off: the fit partly absorbs it (smaller in-sample residual), its
+    leave-one-out residual shows the whole error and is the largest of all points."""
+    cam = random_camera(rng)
+    X = volume_points(rng, 20)
+    uv = cam.project(X) + rng.normal(0, 0.1, (20, 2))
+    uv[5] += [4.0 * np.cos(1.0), 4.0 * np.sin(1.0)]
+    r = dlt_calibrate(X, uv)
+    res = np.linalg.norm(r.residuals, axis=1)
+    assert np.argmax(r.loo_px) == 5 and r.loo_px[5] > 3.5
+    assert res[5] < r.loo_px[5]
+    assert np.median(np.delete(r.loo_px, 5)) < 1.0
+
+
 def test_dlt_rejects_bad_control_points(rng):
     cam = random_camera(rng)
     X = volume_points(rng, 5)

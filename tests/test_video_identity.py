@@ -7,7 +7,7 @@ import pytest
 from bayes_disc.physics import literature_coefficients, simulate
 from bayes_disc.physics.frames import quat_to_matrix
 from bayes_disc.video.camera import look_at
-from bayes_disc.video.identity import IdentityConfig, Tracker, kabsch, label_frame
+from bayes_disc.video.identity import IdentityConfig, Tracker, kabsch, label_frame, layout_distinctness
 
 LAYOUT = np.array([[0.100, 0.000, -0.015], [-0.0308, 0.0846, -0.015], [-0.0707, -0.0778, -0.015]])
 
@@ -140,3 +140,23 @@ def test_kabsch_recovers_pose(rng):
     c = rng.normal(size=3)
     R, t, rms = kabsch(LAYOUT, LAYOUT @ A.T + c)
     assert np.allclose(R, A) and np.allclose(t, c) and rms < 1e-12
+
+
+def test_layout_distinctness_and_an_isosceles_layout(rng):
+    """The side lengths identify the markers only for a scalene layout: an isosceles triangle leaves its
+    two base markers unlabelled in every frame without a prediction, and its distinctness is 0."""
+    d = np.linalg.norm(LAYOUT[:, None] - LAYOUT[None], axis=2)
+    sides = np.array([d[0, 1], d[0, 2], d[1, 2]])
+    # for a triangle the closest relabelling swaps two markers: two sides exchange
+    expected = np.sqrt(2) * np.min(np.abs(sides[:, None] - sides[None, :])[np.triu_indices(3, 1)])
+    assert layout_distinctness(LAYOUT) == pytest.approx(expected, rel=1e-12)
+    assert layout_distinctness(LAYOUT) > IdentityConfig().side_sigma_m * 3
+    iso = np.array([[0.100, 0.0, -0.015], [-0.05, 0.07, -0.015], [-0.05, -0.07, -0.015]])  # |01| = |02|
+    square = np.array([[0.1, 0, 0], [0, 0.1, 0], [-0.1, 0, 0], [0, -0.1, 0]])
+    assert layout_distinctness(iso) < 1e-12 and layout_distinctness(square) < 1e-12
+    assert layout_distinctness(square + rng.normal(0, 0.02, square.shape)) > 1e-3
+    cams = rig()
+    X = iso @ np.diag([1.0, -1.0, -1.0]) + np.array([7.0, -0.5, 1.6])  # right side up
+    lab = label_frame(cams, observe(cams, X, rng), iso, IdentityConfig())
+    assert np.abs(lab.xyz[0] - X[0]).max() < 3e-3                      # the apex is unique
+    assert np.isnan(lab.xyz[1:]).all() and lab.ambiguous[1:].all()    # the base markers never are

@@ -31,6 +31,13 @@ tell the markers apart. Each frame:
    prediction are ignored while tracking.
 
 Gaps stay NaN; nothing is interpolated.
+
+**Layout check.** Without a prediction only the side lengths tell the markers apart: a relabelling π
+of a perfectly measured layout costs Σ_(m<n) (D_π(m)π(n) − D_mn)² / side_sigma² more than the true
+labelling, so if that is below ``ambiguity_margin`` for some π the markers can never be identified
+(an isosceles or equilateral triangle). :func:`layout_distinctness` gives the smallest such change
+of the side lengths; the track configuration rejects layouts below
+``side_sigma_m · √max(ambiguity_margin, 1)``.
 """
 from __future__ import annotations
 
@@ -293,6 +300,28 @@ def label_frame(cameras: list[Camera], blob_uv: list, layout: np.ndarray, cfg: I
         out.cov[m] = cands.cov[k]
         out.views[m] = cands.views[k]
     return out
+
+
+def layout_distinctness(layout) -> float:
+    """Smallest change of the side lengths [m] under a relabelling of the markers:
+    min over permutations π ≠ identity of sqrt(Σ_(m<n) (D_π(m)π(n) − D_mn)²), D_mn = |p_m − p_n|.
+
+    0 for a layout with a symmetry (isosceles or equilateral triangle): its markers cannot be told
+    apart by side lengths. layout (M, 3) body positions [m]; NaN for M > 7 (not evaluated) or M < 2.
+    """
+    P = np.asarray(layout, float).reshape(-1, 3)
+    M = len(P)
+    if M < 2 or M > 7:
+        return float("nan")
+    D = np.linalg.norm(P[:, None, :] - P[None, :, :], axis=2)
+    iu = np.triu_indices(M, 1)
+    best = np.inf
+    for perm in itertools.permutations(range(M)):
+        if perm == tuple(range(M)):
+            continue
+        pi = np.asarray(perm)
+        best = min(best, float(np.sqrt(np.sum((D[pi[:, None], pi[None, :]][iu] - D[iu]) ** 2))))
+    return best
 
 
 def kabsch(body: np.ndarray, world: np.ndarray):

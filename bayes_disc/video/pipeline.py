@@ -26,7 +26,7 @@ from .config import Section, load_yaml
 from .detection import Blobs, DetectionConfig, detect_full, detect_roi
 from .errors import VideoInputError
 from .footage import open_source
-from .identity import FrameLabels, IdentityConfig, Tracker, label_frame
+from .identity import FrameLabels, IdentityConfig, Tracker, label_frame, layout_distinctness
 from .imports import FORMATS, DEFAULT_CONVENTION, read_xypts, read_xyzpts, reprojection_check
 from .triangulation import triangulate
 
@@ -148,6 +148,19 @@ def _markers(sec: Section) -> dict:
     if np.min(d) < 0.005:
         raise sec.error("markers", "two markers are closer than 5 mm")
     return out
+
+
+def _check_layout(sec: Section, markers: dict, ident: IdentityConfig) -> None:
+    """Footage needs a layout whose side lengths identify the markers (a scalene triangle): reject one
+    that some relabelling changes by less than side_sigma_m · √max(ambiguity_margin, 1) (then every
+    frame would be ambiguous, see :mod:`.identity`)."""
+    sep = layout_distinctness(np.array(list(markers.values()), float))
+    need = ident.side_sigma_m * np.sqrt(max(ident.ambiguity_margin, 1.0))
+    if np.isfinite(sep) and sep < need:
+        raise sec.error("markers", f"the layout is (nearly) symmetric: relabelling the markers changes the side "
+                                   f"lengths by only {1e3 * sep:.1f} mm (need ≥ {1e3 * need:.1f} mm = identity."
+                                   "side_sigma_m · √ambiguity_margin), so they could never be told apart; use a "
+                                   "scalene layout")
 
 
 def _convention(sec: Section, default: ImageConvention) -> ImageConvention:
@@ -296,6 +309,8 @@ def parse_track_config(path) -> TrackConfig:
         if isinstance(e, VideoInputError):
             raise
         raise VideoInputError(f"{path}: key 'identity': {e}") from None
+    if importing is None:
+        _check_layout(sec, markers, ident)
     ps = ts.raw("pixel_sigma", "auto")
     if ps == "auto":
         pixel_sigma = None
