@@ -31,8 +31,7 @@ def logprob_time(cfg, repeats: int = 15) -> tuple[float, int]:
     problem = build_problem(cfg)
     nw = n_walkers(cfg.sampler, problem.dim)
     rng = np.random.default_rng(0)
-    theta = problem.prior_mean + 1e-3 * problem.prior_sd * rng.standard_normal((nw, problem.sigma_start))
-    theta = np.concatenate([theta, np.full((nw, problem.n_flights), np.log(2e-3))], axis=1)
+    theta = problem.prior_mean + 1e-3 * problem.prior_sd * rng.standard_normal((nw, problem.dim))
     problem.log_prob(theta)  # compile
     times = []
     for _ in range(repeats):

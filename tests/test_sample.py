@@ -120,11 +120,6 @@ def test_recovery_four_flights_noise_and_convergence(four_flights):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="known open problem (issue 3 stays open): CM0 and CMq (pitching-moment "
-                   "offset and pitch damping, nearly degenerate while the pitch rate q is nearly constant) get "
-                   "posteriors 2-6x narrower than their scatter on noisy 4-flight data: the truth lands 3-5 sd "
-                   "outside (either side, depending on the noise draw), although noise-free data recover them "
-                   "exactly; the sampler does not explore that ridge. strict: fails loudly once it passes.")
 def test_recovery_four_flights_every_coefficient_covered(four_flights):
     summary, truth = four_flights
     p = summary["parameters"]

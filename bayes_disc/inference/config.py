@@ -12,8 +12,8 @@ sampler:                 # emcee settings
   n_tau: 10              # stop when every chain is ≥ n_tau · τ long (τ: emcee's estimator) ...
   rhat: 1.01             # ... R-hat across ensembles is below this ...
   ess: 400               # ... and every coefficient's bulk ESS reaches this
-  independence_fraction: 0.7   # share of the independence move (rest: DE moves)
-  adapt_steps: 150       # warm-up: the independence proposal is re-fitted after 150 and 300 steps
+  independence_fraction: 0.3   # share of the mixture-independence and pCN moves (rest: DE moves)
+  adapt_steps: 150       # warm-up: the pCN reference is re-fitted after 150 and 300 steps
   seed: 1
   processes: 2           # ensembles run in parallel processes
 least_squares: {starts: 4, max_nfev: 200}
@@ -47,7 +47,7 @@ class SamplerSettings:
     n_tau: float = 10.0
     rhat: float = 1.01
     ess: float = 400.0
-    independence_fraction: float = 0.7
+    independence_fraction: float = 0.3
     adapt_steps: int = 150
     seed: int = 1
     processes: int = 2
@@ -123,7 +123,7 @@ def load_config(path, output_override=None) -> RunConfig:
         n_tau=s.number("n_tau", 10.0, positive=True),
         rhat=s.number("rhat", 1.01, minimum=1.0),
         ess=s.number("ess", 400.0, positive=True),
-        independence_fraction=s.number("independence_fraction", 0.7, minimum=0.0, maximum=1.0),
+        independence_fraction=s.number("independence_fraction", 0.3, minimum=0.0, maximum=1.0),
         adapt_steps=s.number("adapt_steps", 150, integer=True, minimum=10),
         seed=s.number("seed", 1, integer=True, nonnegative=True),
         processes=s.number("processes", 2, integer=True, minimum=1),

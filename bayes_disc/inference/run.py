@@ -12,12 +12,36 @@ from .config import RunConfig
 from .data import build_problem
 from .leastsq import fit_least_squares
 from .results import build_inference_data, build_summary, format_table
+from .profile import profile_paths
+from .proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
 from .sampler import run_sampler
 
 
 def _flight_info(problem) -> dict:
     return {f.name: {"file": f.source, "samples": int(f.times.size), "points": int(f.n_points),
                      "t_start": float(f.times[0]), "t_end": float(f.times[-1])} for f in problem.flights}
+
+
+def posterior_approximation(problem, ls, processes: int, out: Path, log=print):
+    """Profile paths of the coefficients through the least-squares optimum (written to
+    ``<out>/profiles.json``) and the ridge-aware independence proposal built from them
+    (:func:`.proposals.independence_proposal`)."""
+    t0 = time.perf_counter()
+    idx = range(problem.n_coef + problem.n_ext)
+    paths = profile_paths(problem, ls.theta, ls.sigma, ls.cov, idx, processes=processes)
+    proposal = independence_proposal(problem, ls.theta, ls.cov, paths)
+    record = {}
+    for path in paths:
+        dep = path_departure(path, ls.theta, ls.cov)
+        record[path.name] = {"value": [p.value for p in path.points], "t": path.t.tolist(),
+                             "deviance": path.deviance.tolist(), "departure_from_laplace": dep,
+                             "shape": path.classify()}
+    (out / "profiles.json").write_text(json.dumps(record, indent=1))
+    ridge = [n for n, r in record.items() if r["departure_from_laplace"] > PROFILE_DEPARTURE]
+    log(f"profile likelihood of {len(paths)} coefficients ({time.perf_counter() - t0:.0f} s): "
+        + (f"non-Gaussian along {', '.join(ridge)}; " if ridge else "all close to Gaussian; ")
+        + f"{len(proposal.parts) - 1} ridge proposal(s)")
+    return proposal
 
 
 def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True, log=print, report: bool = True,
@@ -38,7 +62,11 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True, log=
     np.save(out / "least_squares_theta.npy", ls.theta)
     log(f"least squares: cost {ls.cost:.1f}, condition number {ls.condition_number:.3g}, RMS "
         + ", ".join(f"{k} {v:.2f} mm" for k, v in ls_dict["rms_mm"].items()))
-    chains = run_sampler(problem, ls.theta, ls.cov, cfg.sampler, out, resume=resume, progress=progress)
+    if resume and (out / "chains" / "independence.npz").is_file():
+        proposal = None  # the sampler continues with the approximation saved beside its chains
+    else:
+        proposal = posterior_approximation(problem, ls, cfg.sampler.processes, out, log)
+    chains = run_sampler(problem, proposal, cfg.sampler, out, resume=resume, progress=progress)
     info = {"name": cfg.name, "config": str(cfg.path), "flights": _flight_info(problem),
             "sampler_settings": asdict(cfg.sampler), "markers": cfg.markers}
     summary = build_summary(problem, chains, ls_dict, info)

@@ -3,14 +3,23 @@
 * Several independent ensembles (R-hat across ensembles), each with its own ``emcee.backends.HDFBackend``
   file, advanced in rounds of ``check_every`` steps (in parallel processes), so an interrupted run
   resumes from the files with no lost samples.
-* Walkers start from the least-squares optimum spread by its Gauss–Newton covariance.
-* Moves: Metropolis–Hastings moves built on a Gaussian reference N(μ, Σ) — independence jumps and
-  preconditioned Crank–Nicolson steps; the acceptance includes the proposal density ratio, so each
-  kernel leaves the posterior invariant — mixed with emcee's differential-evolution moves, which take
-  over where the posterior is far from Gaussian. The reference starts as the Laplace approximation
-  (least-squares optimum and covariance) and is re-fitted to the pooled ensembles' samples twice
-  during warm-up (after ``adapt_steps`` and 2·``adapt_steps`` steps); it is fixed afterwards and the
-  warm-up is discarded as burn-in.
+* Walkers start from a ridge-aware approximation of the posterior (:mod:`.proposals`), over-dispersed
+  relative to the Laplace approximation where the posterior is, so that R-hat across ensembles can see
+  a failure to mix.
+* Moves: Metropolis–Hastings moves with exact acceptance ratios (each leaves the posterior invariant),
+  mixed with emcee's differential-evolution moves:
+  - independence jumps from :func:`.proposals.independence_proposal`: the Laplace approximation plus a
+    ridge proposal along every profile-likelihood path (:mod:`.profile`) that departs from it. A weakly
+    identified combination (the demo's CM0 and CMq with the flights' wobble initial conditions) makes
+    a thin curved valley that a Gaussian cannot cover and that local moves cross only over thousands
+    of steps; the ridge proposals follow the valley, so the jumps reach all of it;
+  - preconditioned Crank–Nicolson steps on a Gaussian reference N(μ, Σ): first the moments of the
+    independence proposal;
+  - both are re-fitted to the pooled ensembles' samples twice during warm-up (after ``adapt_steps`` and
+    2·``adapt_steps`` steps: the reference's mean and covariance, the independence proposal's weights);
+    they are fixed afterwards and the warm-up is discarded as burn-in;
+  - emcee's DE moves, mostly with γ scaled down (local steps accepted often), some at the default γ,
+    and snooker moves.
 * Stopping: R-hat across ensembles < ``rhat`` for every parameter, bulk ESS ≥ ``ess`` for every
   coefficient (ArviZ, rank-normalised; walkers as chains, so walkers that have not mixed lower it),
   and every chain ≥ ``n_tau`` · τ after burn-in (τ: emcee's integrated autocorrelation time,
@@ -30,97 +39,32 @@ import numpy as np
 
 from .config import SamplerSettings
 from .model import Problem
+from .proposals import CompositeProposal, Proposal
 
-# A Student-t proposal is no good in ~60 dimensions: its radius spreads far more than the posterior's,
-# so the importance weights vary by e^±10 and almost nothing is accepted. Gaussian (ν = ∞) it is.
-T_DOF = np.inf
+#: re-fits of the pCN reference during warm-up
 ADAPTATIONS = 2
-PROPOSAL_INFLATION = 1.03  # proposal sd / posterior sd after adaptation (slightly wider: safe tails)
+
+#: Within the Metropolis–Hastings share: independence jumps and long pCN steps. Measured on the demo
+#: posterior (a curved valley): ridge-proposal jumps are accepted ~5 % of the time and cross the whole
+#: valley; pCN with ρ = 0.97 ~5 %, ρ ≤ 0.9 ≤ 1 %.
+MH_MIX = ((None, 0.5), (0.97, 0.5))
+#: Within the DE share: emcee's DE move with γ scaled down (accepted ~30 % on the demo posterior,
+#: against ~4 % for the default γ = 2.38/√(2·dim)), the default DE move and the snooker move.
+DE_SCALE = 0.35
+DE_MIX = ((DE_SCALE, 0.7), (1.0, 0.15), ("snooker", 0.15))
 
 
-@dataclass(frozen=True)
-class Proposal:
-    """Gaussian reference N(μ, Σ), Σ = L Lᵀ (a Student-t with ν dof when ν is finite), used as a
-    preconditioned Crank–Nicolson proposal x′ = μ + ρ (x − μ) + √(1 − ρ²) L z, z ~ N(0, I).
-
-    ρ = 0 is the independence sampler; ρ > 0 makes a local move that is reversible with respect to
-    the Gaussian, so its Metropolis–Hastings factor is the same density ratio N(x) / N(x′)
-    (Cotter et al. 2013). Where the posterior deviates from the Gaussian, ρ > 0 keeps acceptance high
-    while ρ = 0 makes the big jumps. (Gaussian only: with finite ν the factor holds for ρ = 0.)"""
-
-    mean: np.ndarray
-    chol: np.ndarray
-    dof: float = T_DOF
-    adapted: int = 0   # how many warm-up re-fits this proposal has had
-    rho: float = 0.0
-
-    def with_rho(self, rho: float) -> "Proposal":
-        return Proposal(self.mean, self.chol, self.dof, self.adapted, rho)
-
-    @classmethod
-    def from_cov(cls, mean, cov, dof=T_DOF, adapted=0) -> "Proposal":
-        """Proposal whose covariance is ``cov`` (t: scale matrix cov·(ν−2)/ν)."""
-        cov = 0.5 * (cov + cov.T) * (1.0 if np.isinf(dof) else (dof - 2.0) / dof)
-        return cls(mean=np.asarray(mean, float), chol=scaled_cholesky(cov), dof=dof, adapted=adapted)
-
-    def refit(self, samples: np.ndarray) -> "Proposal":
-        """The proposal re-fitted to samples (n, dim): their mean and inflated covariance."""
-        cov = np.cov(samples.T) * PROPOSAL_INFLATION**2
-        return Proposal.from_cov(samples.mean(axis=0), cov, self.dof, self.adapted + 1)
-
-    def log_density(self, x: np.ndarray) -> np.ndarray:
-        z = np.linalg.solve(self.chol, (x - self.mean).T).T
-        if np.isinf(self.dof):
-            return -0.5 * np.sum(z * z, axis=1)
-        d = self.mean.size
-        return -0.5 * (self.dof + d) * np.log1p(np.sum(z * z, axis=1) / self.dof)
-
-    def draw(self, n: int, random) -> np.ndarray:
-        d = self.mean.size
-        z = random.randn(n, d)
-        if np.isinf(self.dof):
-            return self.mean + z @ self.chol.T
-        g = random.chisquare(self.dof, size=n) / self.dof
-        return self.mean + (z @ self.chol.T) / np.sqrt(g)[:, None]
-
-    def __call__(self, coords, random):
-        """emcee MHMove proposal: new points and ln q(x | x′) − ln q(x′ | x) = ln N(x) − ln N(x′)."""
-        fresh = self.draw(coords.shape[0], random)
-        if self.rho == 0.0:
-            new = fresh
-        else:
-            new = self.mean + self.rho * (coords - self.mean) + np.sqrt(1 - self.rho**2) * (fresh - self.mean)
-        return new, self.log_density(coords) - self.log_density(new)
-
-    def save(self, path: Path) -> None:
-        np.savez(path, mean=self.mean, chol=self.chol, dof=self.dof, adapted=self.adapted)
-
-    @classmethod
-    def load(cls, path: Path) -> "Proposal":
-        z = np.load(path)
-        return cls(mean=z["mean"], chol=z["chol"], dof=float(z["dof"]), adapted=int(z["adapted"]))
-
-
-def scaled_cholesky(cov: np.ndarray) -> np.ndarray:
-    """Cholesky factor of a covariance whose scales span many decades (CNr ~ 1e−7 beside positions ~ 1e−3):
-    factor the correlation matrix (eigenvalues floored at 1e−10) and scale back."""
-    d = np.sqrt(np.maximum(np.diag(cov), 1e-300))
-    corr = cov / np.outer(d, d)
-    w, V = np.linalg.eigh(0.5 * (corr + corr.T))
-    w = np.maximum(w, 1e-10 * w.max())
-    return d[:, None] * np.linalg.cholesky((V * w) @ V.T)
-
-
-#: share of the Gaussian-reference moves by ρ (independence jumps and pCN steps of two lengths)
-PCN_MIX = ((0.0, 0.4), (0.7, 0.35), (0.9, 0.25))
-
-
-def _moves(proposal: Proposal, fraction: float):
+def _moves(proposal: Proposal, independence: CompositeProposal, fraction: float, dim: int):
     moves = []
     if fraction > 0:
-        moves += [(emcee.moves.MHMove(proposal.with_rho(rho)), fraction * share) for rho, share in PCN_MIX]
+        for rho, share in MH_MIX:
+            move = independence if rho is None else proposal.with_rho(rho)
+            moves.append((emcee.moves.MHMove(move), fraction * share))
     if fraction < 1:
-        moves += [(emcee.moves.DEMove(), 0.8 * (1 - fraction)), (emcee.moves.DESnookerMove(), 0.2 * (1 - fraction))]
+        g0 = 2.38 / np.sqrt(2 * dim)
+        for kind, share in DE_MIX:
+            move = emcee.moves.DESnookerMove() if kind == "snooker" else emcee.moves.DEMove(gamma0=kind * g0)
+            moves.append((move, (1 - fraction) * share))
     return moves
 
 
@@ -129,13 +73,13 @@ def n_walkers(settings: SamplerSettings, dim: int) -> int:
     return max(w + (w % 2), 2 * dim + 2)
 
 
-def initial_walkers(mean, cov, n: int, problem: Problem, rng: np.random.Generator) -> np.ndarray:
-    """Draws from N(mean, cov) with finite log-posterior (redrawn otherwise), linearly independent."""
-    L = scaled_cholesky(cov)
-    out = np.empty((n, mean.size))
+def initial_walkers(start: CompositeProposal, n: int, problem: Problem, rng: np.random.Generator) -> np.ndarray:
+    """Draws from ``start`` with finite log-posterior (redrawn otherwise), linearly independent."""
+    random = np.random.RandomState(rng.integers(2**32))
+    out = np.empty((n, problem.dim))
     filled = 0
     for _ in range(50):
-        cand = mean + rng.standard_normal((n, mean.size)) @ L.T
+        cand = start.draw(n, random)
         ok = np.isfinite(problem.log_prob(cand))
         take = min(int(ok.sum()), n - filled)
         out[filled: filled + take] = cand[ok][:take]
@@ -150,17 +94,18 @@ def initial_walkers(mean, cov, n: int, problem: Problem, rng: np.random.Generato
 _WORKER: dict = {}
 
 
-def _init_worker(problem, proposal, fraction):
-    _WORKER.update(problem=problem, proposal=proposal, fraction=fraction)
+def _init_worker(problem, proposal, independence, fraction):
+    _WORKER.update(problem=problem, proposal=proposal, independence=independence, fraction=fraction)
 
 
 def _advance(task) -> int:
     path, n_steps, start, seed = task
-    problem, proposal, fraction = _WORKER["problem"], _WORKER["proposal"], _WORKER["fraction"]
+    problem, proposal, independence = _WORKER["problem"], _WORKER["proposal"], _WORKER["independence"]
     backend = emcee.backends.HDFBackend(str(path))
     nw = start.shape[0] if start is not None else backend.shape[0]
     sampler = emcee.EnsembleSampler(nw, problem.dim, problem.log_prob_blobs, vectorize=True, backend=backend,
-                                    moves=_moves(proposal, fraction), blobs_dtype=float)
+                                    moves=_moves(proposal, independence, _WORKER["fraction"], problem.dim),
+                                    blobs_dtype=float)
     if start is not None:
         sampler.random_state = np.random.RandomState(seed).get_state()
         sampler.run_mcmc(start, n_steps, progress=False)
@@ -245,20 +190,24 @@ def convergence(chain: np.ndarray, settings: SamplerSettings, coef_idx: np.ndarr
             "ess_min_coef": float(np.min(ess[coef_idx])), "converged": bool(ok)}
 
 
-def run_sampler(problem: Problem, theta0: np.ndarray, cov0: np.ndarray, settings: SamplerSettings,
-                out_dir: Path, resume: bool = False, progress: bool = True) -> Chains:
-    """Run (or resume) the ensembles until converged or the cap; returns the post-burn-in chains."""
+def run_sampler(problem: Problem, independence: CompositeProposal | None, settings: SamplerSettings, out_dir: Path,
+                resume: bool = False, progress: bool = True) -> Chains:
+    """Run (or resume) the ensembles until converged or the cap; returns the post-burn-in chains.
+    ``independence``: the ridge-aware posterior approximation (:func:`.proposals.independence_proposal`)
+    that starts the walkers and proposes the independence jumps; on resume (None allowed) the one saved
+    with the chains is used."""
     from tqdm import tqdm
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     chain_dir = out_dir / "chains"
     chain_dir.mkdir(parents=True, exist_ok=True)
     paths = [chain_dir / f"ensemble_{e}.h5" for e in range(settings.ensembles)]
-    prop_path = chain_dir / "proposal.npz"
+    prop_path, ind_path = chain_dir / "proposal.npz", chain_dir / "independence.npz"
     nw = n_walkers(settings, problem.dim)
     existing = [p.exists() for p in paths]
-    if resume and all(existing) and prop_path.exists():
+    if resume and all(existing) and prop_path.exists() and ind_path.exists():
         proposal = Proposal.load(prop_path)
+        independence = CompositeProposal.load(ind_path)
         done = int(min(emcee.backends.HDFBackend(str(p), read_only=True).iteration for p in paths))
         starts = [None] * len(paths)
     else:
@@ -267,10 +216,13 @@ def run_sampler(problem: Problem, theta0: np.ndarray, cov0: np.ndarray, settings
                 p.unlink(missing_ok=True)
         if resume and any(existing):
             raise ValueError(f"{chain_dir}: incomplete chain files; cannot resume (remove the folder to restart)")
-        proposal = Proposal.from_cov(theta0, cov0)
-        proposal.save(prop_path)
+        if independence is None:
+            raise ValueError(f"{chain_dir}: nothing to resume; a fresh run needs the posterior approximation")
         rng = np.random.default_rng(settings.seed)
-        starts = [initial_walkers(theta0, cov0, nw, problem, rng) for _ in paths]
+        proposal = Proposal.from_cov(*independence.moments(np.random.RandomState(rng.integers(2**32))))
+        proposal.save(prop_path)
+        independence.save(ind_path)
+        starts = [initial_walkers(independence, nw, problem, rng) for _ in paths]
         done = 0
     coef_idx = np.arange(problem.n_coef + problem.n_ext)
     adapt_at = [settings.adapt_steps * (i + 1) for i in range(ADAPTATIONS)]
@@ -282,7 +234,7 @@ def run_sampler(problem: Problem, theta0: np.ndarray, cov0: np.ndarray, settings
     finished = False
     while not finished:
         with ctx.Pool(min(settings.processes, settings.ensembles), initializer=_init_worker,
-                      initargs=(problem, proposal, settings.independence_fraction)) as pool:
+                      initargs=(problem, proposal, independence, settings.independence_fraction)) as pool:
             while True:
                 if done > 0 and proposal.adapted < ADAPTATIONS and done >= adapt_at[proposal.adapted]:
                     chain, _, _ = _read(paths)
@@ -290,7 +242,12 @@ def run_sampler(problem: Problem, theta0: np.ndarray, cov0: np.ndarray, settings
                     warm = chain[:, (lo + done) // 2: done].reshape(-1, problem.dim)
                     proposal = proposal.refit(warm)
                     proposal.save(prop_path)
-                    history.append({"steps": done, "adapted_proposal": proposal.adapted})
+                    sub = warm[np.random.default_rng(settings.seed + done).choice(len(warm), min(len(warm), 4000),
+                                                                                 replace=False)]
+                    independence = independence.reweighted(sub)
+                    independence.save(ind_path)
+                    history.append({"steps": done, "adapted_proposal": proposal.adapted,
+                                    "independence_weights": np.exp(independence.log_weights).round(4).tolist()})
                     break  # new pool with the new proposal
                 if done >= adapt_at[-1] + settings.check_every:
                     chain, _, _ = _read(paths)

@@ -1,0 +1,376 @@
+"""Metropolis–Hastings proposals of the sampler, each with an exact density (so every move's acceptance
+ratio is exact and the posterior stays invariant whatever the proposal's quality).
+
+* :class:`Proposal` — a Gaussian reference N(μ, Σ) for preconditioned Crank–Nicolson steps (ρ > 0) or
+  independence jumps (ρ = 0).
+* :class:`MixtureProposal` — a Gaussian mixture (here: the Laplace approximation at the optimum).
+* :class:`RidgeProposal` — follows a profile-likelihood path (:mod:`.profile`) of one parameter θ_i:
+  θ_i from the Laplace marginal along the path, g(v) ∝ p(θ*(v) | y) |S(v)|^½ (interpolated log-linearly
+  between path points), then θ_−i | θ_i = v from the conditional Gaussian of the local Gauss–Newton
+  covariance Σ(v), mean θ*_−i(v) + b(v)(v − θ*_i) with b = Σ_−i,i / Σ_ii, covariance
+  S = Σ_−i,−i − b Σ_i,−i (interpolated between path points). Where the posterior is a thin curved valley
+  whose width grows along it (the demo's CM0–CMq–wobble combination: e^16 in volume along the CMq
+  path), no single Gaussian, nor a mixture of full local Gaussians, covers it (independence jumps
+  accepted ≤ 1 %); following the path with interpolated local conditionals does (≈ 24 %).
+* :class:`CompositeProposal` — a weighted mixture of proposals: the independence proposal of the sampler
+  is the Laplace approximation plus one ridge proposal per profile path that departs from it; its
+  weights are re-fitted to the warm-up samples (where the posterior's mass lies away from the mode,
+  the Laplace part and the ridges of well-determined parameters are hardly ever accepted).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.linalg import solve_triangular
+
+from .model import Problem
+
+# A Student-t proposal is no good in ~60 dimensions: its radius spreads far more than the posterior's,
+# so the importance weights vary by e^±10 and almost nothing is accepted. Gaussian (ν = ∞) it is.
+T_DOF = np.inf
+PROPOSAL_INFLATION = 1.03  # proposal sd / posterior sd after adaptation (slightly wider: safe tails)
+
+
+@dataclass(frozen=True)
+class Proposal:
+    """Gaussian reference N(μ, Σ), Σ = L Lᵀ (a Student-t with ν dof when ν is finite), used as a
+    preconditioned Crank–Nicolson proposal x′ = μ + ρ (x − μ) + √(1 − ρ²) L z, z ~ N(0, I).
+
+    ρ = 0 is the independence sampler; ρ > 0 makes a local move that is reversible with respect to
+    the Gaussian, so its Metropolis–Hastings factor is the same density ratio N(x) / N(x′)
+    (Cotter et al. 2013). Where the posterior deviates from the Gaussian, ρ > 0 keeps acceptance high
+    while ρ = 0 makes the big jumps. (Gaussian only: with finite ν the factor holds for ρ = 0.)"""
+
+    mean: np.ndarray
+    chol: np.ndarray
+    dof: float = T_DOF
+    adapted: int = 0   # how many warm-up re-fits this proposal has had
+    rho: float = 0.0
+
+    def with_rho(self, rho: float) -> "Proposal":
+        return Proposal(self.mean, self.chol, self.dof, self.adapted, rho)
+
+    @classmethod
+    def from_cov(cls, mean, cov, dof=T_DOF, adapted=0) -> "Proposal":
+        """Proposal whose covariance is ``cov`` (t: scale matrix cov·(ν−2)/ν)."""
+        cov = 0.5 * (cov + cov.T) * (1.0 if np.isinf(dof) else (dof - 2.0) / dof)
+        return cls(mean=np.asarray(mean, float), chol=scaled_cholesky(cov), dof=dof, adapted=adapted)
+
+    def refit(self, samples: np.ndarray) -> "Proposal":
+        """The proposal re-fitted to samples (n, dim): their mean and inflated covariance."""
+        cov = np.cov(samples.T) * PROPOSAL_INFLATION**2
+        return Proposal.from_cov(samples.mean(axis=0), cov, self.dof, self.adapted + 1)
+
+    def log_density(self, x: np.ndarray) -> np.ndarray:
+        z = np.linalg.solve(self.chol, (x - self.mean).T).T
+        if np.isinf(self.dof):
+            return -0.5 * np.sum(z * z, axis=1)
+        d = self.mean.size
+        return -0.5 * (self.dof + d) * np.log1p(np.sum(z * z, axis=1) / self.dof)
+
+    def draw(self, n: int, random) -> np.ndarray:
+        d = self.mean.size
+        z = random.randn(n, d)
+        if np.isinf(self.dof):
+            return self.mean + z @ self.chol.T
+        g = random.chisquare(self.dof, size=n) / self.dof
+        return self.mean + (z @ self.chol.T) / np.sqrt(g)[:, None]
+
+    def __call__(self, coords, random):
+        """emcee MHMove proposal: new points and ln q(x | x′) − ln q(x′ | x) = ln N(x) − ln N(x′)."""
+        fresh = self.draw(coords.shape[0], random)
+        if self.rho == 0.0:
+            new = fresh
+        else:
+            new = self.mean + self.rho * (coords - self.mean) + np.sqrt(1 - self.rho**2) * (fresh - self.mean)
+        return new, self.log_density(coords) - self.log_density(new)
+
+    def save(self, path: Path) -> None:
+        np.savez(path, mean=self.mean, chol=self.chol, dof=self.dof, adapted=self.adapted)
+
+    @classmethod
+    def load(cls, path: Path) -> "Proposal":
+        z = np.load(path)
+        return cls(mean=z["mean"], chol=z["chol"], dof=float(z["dof"]), adapted=int(z["adapted"]))
+
+
+def scaled_cholesky(cov: np.ndarray) -> np.ndarray:
+    """Cholesky factor of a covariance whose scales span many decades (CNr ~ 1e−7 beside positions ~ 1e−3):
+    factor the correlation matrix (eigenvalues floored at 1e−10) and scale back."""
+    d = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+    corr = cov / np.outer(d, d)
+    w, V = np.linalg.eigh(0.5 * (corr + corr.T))
+    w = np.maximum(w, 1e-10 * w.max())
+    return d[:, None] * np.linalg.cholesky((V * w) @ V.T)
+
+
+@dataclass(frozen=True)
+class MixtureProposal:
+    """Gaussian mixture Σ_k w_k N(m_k, L_k L_kᵀ), used as an independence proposal (emcee MHMove):
+    x′ ~ mixture, log factor ln q(x) − ln q(x′)."""
+
+    means: np.ndarray        # (K, dim)
+    chols: np.ndarray        # (K, dim, dim) lower-triangular
+    log_weights: np.ndarray  # (K,) normalised
+
+    @classmethod
+    def from_components(cls, means, covs, log_weights) -> "MixtureProposal":
+        lw = np.asarray(log_weights, float)
+        lw = lw - np.logaddexp.reduce(lw)
+        return cls(np.asarray(means, float), np.array([scaled_cholesky(c) for c in covs]), lw)
+
+    @property
+    def weights(self) -> np.ndarray:
+        return np.exp(self.log_weights)
+
+    def moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """Mean and covariance of the mixture."""
+        w = self.weights
+        mean = w @ self.means
+        dev = self.means - mean
+        cov = np.einsum("k,kij,klj->il", w, self.chols, self.chols) + (dev.T * w) @ dev
+        return mean, 0.5 * (cov + cov.T)
+
+    def log_density(self, x: np.ndarray) -> np.ndarray:
+        """ln q(x) for x (n, dim): all components' whitened offsets L_k⁻¹(x − m_k) in one matrix product."""
+        x = np.atleast_2d(x)
+        K, d = self.means.shape
+        if not hasattr(self, "_inv"):
+            inv = np.array([solve_triangular(L, np.eye(d), lower=True) for L in self.chols])
+            shift = np.einsum("kij,kj->ki", inv, self.means)
+            const = self.log_weights - np.log(np.diagonal(self.chols, axis1=1, axis2=2)).sum(axis=1)
+            object.__setattr__(self, "_inv", (inv.reshape(K * d, d), shift, const))
+        inv, shift, const = self._inv
+        z = (inv @ x.T).reshape(K, d, -1) - shift[:, :, None]
+        out = const[:, None] - 0.5 * np.einsum("kdn,kdn->kn", z, z)
+        return np.logaddexp.reduce(out, axis=0) - 0.5 * d * np.log(2 * np.pi)
+
+    def draw(self, n: int, random) -> np.ndarray:
+        k = random.choice(self.means.shape[0], size=n, p=self.weights / self.weights.sum())
+        z = random.randn(n, self.means.shape[1])
+        return self.means[k] + np.einsum("nij,nj->ni", self.chols[k], z)
+
+    def __call__(self, coords, random):
+        new = self.draw(coords.shape[0], random)
+        return new, self.log_density(coords) - self.log_density(new)
+
+    def save(self, path: Path) -> None:
+        np.savez(path, means=self.means, chols=self.chols, log_weights=self.log_weights)
+
+    @classmethod
+    def load(cls, path: Path) -> "MixtureProposal":
+        z = np.load(path)
+        return cls(means=z["means"], chols=z["chols"], log_weights=z["log_weights"])
+
+
+#: a profile path whose deviance departs from t² by more than this (in units of 1 + t²/4), or whose
+#: points lie farther than this from the Laplace prediction (Mahalanobis), gets a ridge proposal
+PROFILE_DEPARTURE = 1.0
+#: the Mahalanobis test looks at path points up to this profile deviance (3 σ)
+DEPARTURE_DEVIANCE = 9.0
+#: share of the central Laplace approximation in the independence proposal (the rest: ridge proposals),
+#: before the weights are re-fitted to warm-up samples (:meth:`CompositeProposal.reweighted`)
+CENTRAL_WEIGHT = 0.2
+#: least weight of a part after re-fitting
+WEIGHT_FLOOR = 0.02
+
+
+def path_departure(path, theta_hat: np.ndarray, cov_hat: np.ndarray) -> float:
+    """How far a profile path strays from what the Laplace approximation predicts: the larger of its
+    deviance misfit (:meth:`.ProfilePath.gaussian_misfit`) and the Mahalanobis distance (Laplace metric)
+    between each path point within ``DEPARTURE_DEVIANCE`` and the Laplace conditional mean
+    θ̂ + Σ_:,i/Σ_ii · (v − θ̂_i)."""
+    i = path.index
+    L = scaled_cholesky(cov_hat)
+    worst = path.gaussian_misfit()
+    for p in path.points:
+        if p.deviance > DEPARTURE_DEVIANCE:
+            continue
+        pred = theta_hat + cov_hat[:, i] / cov_hat[i, i] * (p.value - theta_hat[i])
+        z = solve_triangular(L, p.theta - pred, lower=True)
+        worst = max(worst, float(np.sqrt(z @ z)))
+    return worst
+
+
+@dataclass(frozen=True)
+class RidgeProposal:
+    """Independence proposal along the profile path of parameter ``index`` (see the module docstring).
+
+    Path points k = 0 … K−1 (sorted by v_k = θ*_k,i) carry the Laplace-marginal log density
+    ℓ_k = ln p(θ*_k | y) + ½ ln|S_k| (relative), the conditional mean θ*_k,−i with slope b_k and the
+    Cholesky factor L_k of S_k. Between two points, ln g(v) is linear in v and the conditional is
+    N((1−a) μ_k(v) + a μ_k+1(v), L(v) L(v)ᵀ), μ_j(v) = θ*_j,−i + b_j (v − v_j), L(v) = (1−a) L_k + a L_k+1,
+    a = (v − v_k)/(v_k+1 − v_k); beyond the end points g has Gaussian tails of the end points' local sd
+    s and the end point's conditional. The density is continuous and exact (normalised analytically)."""
+
+    index: int
+    v: np.ndarray            # (K,) path values of θ_i, increasing
+    log_g: np.ndarray        # (K,) Laplace-marginal log density at the points (relative)
+    s: np.ndarray            # (K,) local sd of θ_i (only the end points' are used: tails)
+    means: np.ndarray        # (K, dim − 1) θ*_k,−i
+    slopes: np.ndarray       # (K, dim − 1) b_k
+    chols: np.ndarray        # (K, dim − 1, dim − 1) Cholesky factors of S_k
+
+    @classmethod
+    def from_path(cls, problem: Problem, path) -> "RidgeProposal":
+        i = path.index
+        pts = sorted((p for p in path.points if p.ok), key=lambda p: p.value)
+        lp = problem.log_prob(np.array([p.theta for p in pts])) if pts else np.zeros(0)
+        rest = np.r_[0:i, i + 1:problem.dim]
+        v, s, lg, means, slopes, chols = [], [], [], [], [], []
+        for p, lpk in zip(pts, lp):
+            if not np.isfinite(lpk) or (v and p.value <= v[-1]):
+                continue
+            S = p.cov
+            b = S[rest, i] / S[i, i]
+            L = scaled_cholesky(S[np.ix_(rest, rest)] - np.outer(b, S[i, rest]))
+            v.append(p.value)
+            s.append(np.sqrt(S[i, i]))
+            lg.append(lpk + np.sum(np.log(np.diag(L))))
+            means.append(p.theta[rest])
+            slopes.append(b)
+            chols.append(L)
+        lg = np.array(lg)
+        return cls(i, np.array(v), lg - lg.max() if lg.size else lg, np.array(s), np.array(means),
+                   np.array(slopes), np.array(chols))
+
+    # -- the 1-D density g of θ_i -------------------------------------------------------------------------
+    def _pieces(self):
+        """Masses of: the left tail, each segment, the right tail (unnormalised); and segment slopes."""
+        h = np.diff(self.v)
+        beta = np.diff(self.log_g) / h
+        bh = beta * h
+        seg = np.exp(self.log_g[:-1]) * h * np.where(np.abs(bh) > 1e-12, np.expm1(bh) / np.where(bh == 0, 1, bh), 1.0)
+        tails = np.exp(self.log_g[[0, -1]]) * self.s[[0, -1]] * np.sqrt(np.pi / 2)
+        return np.r_[tails[0], seg, tails[1]], beta, h
+
+    def log_g_density(self, x: np.ndarray) -> np.ndarray:
+        mass, beta, h = self._pieces()
+        out = np.interp(x, self.v, self.log_g)
+        lo, hi = x < self.v[0], x > self.v[-1]
+        out[lo] = self.log_g[0] - 0.5 * ((x[lo] - self.v[0]) / self.s[0]) ** 2
+        out[hi] = self.log_g[-1] - 0.5 * ((x[hi] - self.v[-1]) / self.s[-1]) ** 2
+        return out - np.log(mass.sum())
+
+    def draw_g(self, n: int, random) -> np.ndarray:
+        mass, beta, h = self._pieces()
+        piece = random.choice(mass.size, size=n, p=mass / mass.sum())
+        u = random.rand(n)
+        x = np.empty(n)
+        left, right = piece == 0, piece == mass.size - 1
+        x[left] = self.v[0] - self.s[0] * np.abs(random.randn(int(left.sum())))
+        x[right] = self.v[-1] + self.s[-1] * np.abs(random.randn(int(right.sum())))
+        mid = ~(left | right)
+        j = piece[mid] - 1
+        bj, hj, uj = beta[j], h[j], u[mid]
+        flat = np.abs(bj * hj) < 1e-12
+        step = np.where(flat, uj * hj, np.log1p(uj * np.expm1(bj * hj)) / np.where(flat, 1.0, bj))
+        x[mid] = self.v[j] + step
+        return x
+
+    # -- the conditional of the other parameters ---------------------------------------------------------
+    def _conditional(self, vi: np.ndarray):
+        k = np.clip(np.searchsorted(self.v, vi) - 1, 0, self.v.size - 2)
+        a = np.clip((vi - self.v[k]) / (self.v[k + 1] - self.v[k]), 0.0, 1.0)
+        m0 = self.means[k] + self.slopes[k] * (vi - self.v[k])[:, None]
+        m1 = self.means[k + 1] + self.slopes[k + 1] * (vi - self.v[k + 1])[:, None]
+        mean = (1 - a)[:, None] * m0 + a[:, None] * m1
+        L = (1 - a)[:, None, None] * self.chols[k] + a[:, None, None] * self.chols[k + 1]
+        return mean, L
+
+    def log_density(self, x: np.ndarray) -> np.ndarray:
+        x = np.atleast_2d(x)
+        vi = x[:, self.index]
+        mean, L = self._conditional(vi)
+        r = np.delete(x, self.index, axis=1) - mean
+        out = self.log_g_density(vi) - 0.5 * r.shape[1] * np.log(2 * np.pi)
+        for n in range(x.shape[0]):
+            z = solve_triangular(L[n], r[n], lower=True, check_finite=False)
+            out[n] -= np.sum(np.log(np.diag(L[n]))) + 0.5 * z @ z
+        return out
+
+    def draw(self, n: int, random) -> np.ndarray:
+        vi = self.draw_g(n, random)
+        mean, L = self._conditional(vi)
+        rest = mean + np.einsum("nij,nj->ni", L, random.randn(n, self.means.shape[1]))
+        return np.insert(rest, self.index, vi, axis=1)
+
+    def arrays(self) -> dict:
+        return {"index": np.array(self.index), "v": self.v, "log_g": self.log_g, "s": self.s,
+                "means": self.means, "slopes": self.slopes, "chols": self.chols}
+
+
+@dataclass(frozen=True)
+class CompositeProposal:
+    """Σ_j w_j q_j(x) over proposals with ``log_density`` and ``draw``; an independence MH proposal."""
+
+    parts: tuple
+    log_weights: np.ndarray
+
+    def log_density(self, x: np.ndarray) -> np.ndarray:
+        x = np.atleast_2d(x)
+        return np.logaddexp.reduce([lw + q.log_density(x) for lw, q in zip(self.log_weights, self.parts)], axis=0)
+
+    def draw(self, n: int, random) -> np.ndarray:
+        w = np.exp(self.log_weights)
+        j = random.choice(len(self.parts), size=n, p=w / w.sum())
+        out = np.empty((n, self.parts[0].draw(1, random).shape[1]))
+        for jj in np.unique(j):
+            out[j == jj] = self.parts[jj].draw(int(np.sum(j == jj)), random)
+        return out
+
+    def __call__(self, coords, random):
+        new = self.draw(coords.shape[0], random)
+        return new, self.log_density(coords) - self.log_density(new)
+
+    def reweighted(self, samples: np.ndarray, floor: float = WEIGHT_FLOOR) -> "CompositeProposal":
+        """Weights re-fitted to posterior samples (n, dim) by one EM step: w_j ← mean over the samples of
+        the part's responsibility w_j q_j(x) / q(x) (maximises E_π[ln q] over the weights), floored at
+        ``floor`` so no part is switched off."""
+        lq = np.array([lw + q.log_density(samples) for lw, q in zip(self.log_weights, self.parts)])
+        resp = np.exp(lq - np.logaddexp.reduce(lq, axis=0)).mean(axis=1)
+        w = np.maximum(resp, floor)
+        return CompositeProposal(self.parts, np.log(w / w.sum()))
+
+    def moments(self, random, n: int = 20_000) -> tuple[np.ndarray, np.ndarray]:
+        """Mean and covariance, from n draws."""
+        x = self.draw(n, random)
+        return x.mean(axis=0), np.cov(x.T)
+
+    def save(self, path: Path) -> None:
+        data = {"log_weights": self.log_weights}
+        for j, q in enumerate(self.parts):
+            if isinstance(q, MixtureProposal):
+                data.update({f"{j}_mixture_means": q.means, f"{j}_mixture_chols": q.chols,
+                             f"{j}_mixture_log_weights": q.log_weights})
+            else:
+                data.update({f"{j}_ridge_{k}": v for k, v in q.arrays().items()})
+        np.savez(path, **data)
+
+    @classmethod
+    def load(cls, path: Path) -> "CompositeProposal":
+        z = np.load(path)
+        parts = []
+        for j in range(len(z["log_weights"])):
+            if f"{j}_mixture_means" in z:
+                parts.append(MixtureProposal(z[f"{j}_mixture_means"], z[f"{j}_mixture_chols"],
+                                             z[f"{j}_mixture_log_weights"]))
+            else:
+                a = {k: z[f"{j}_ridge_{k}"] for k in ("v", "log_g", "s", "means", "slopes", "chols")}
+                parts.append(RidgeProposal(index=int(z[f"{j}_ridge_index"]), **a))
+        return cls(tuple(parts), z["log_weights"])
+
+
+def independence_proposal(problem: Problem, theta_hat: np.ndarray, cov_hat: np.ndarray, paths) -> CompositeProposal:
+    """The Laplace approximation N(θ̂, Σ̂) (weight ``CENTRAL_WEIGHT``, or 1 if no path departs) plus, in equal
+    shares, a :class:`RidgeProposal` along every profile path that departs from it (:func:`path_departure`)."""
+    laplace = MixtureProposal.from_components([theta_hat], [cov_hat], [0.0])
+    ridges = [RidgeProposal.from_path(problem, p) for p in paths
+              if path_departure(p, theta_hat, cov_hat) > PROFILE_DEPARTURE]
+    ridges = [r for r in ridges if r.v.size >= 2]
+    if not ridges:
+        return CompositeProposal((laplace,), np.zeros(1))
+    lw = np.r_[np.log(CENTRAL_WEIGHT), np.full(len(ridges), np.log((1 - CENTRAL_WEIGHT) / len(ridges)))]
+    return CompositeProposal((laplace, *ridges), lw)
