@@ -44,6 +44,14 @@ def _cmd_sample(args) -> int:
     return 0 if summary["convergence"]["converged"] or not args.strict else 3
 
 
+def _cmd_identifiability(args) -> int:
+    from .diagnostics.run import run_identifiability
+    from .inference.config import load_config
+    cfg = load_config(args.config, output_override=args.output)
+    run_identifiability(cfg, profiles=args.profiles, design=not args.no_design)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="bayes-disc", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"bayes-disc {__version__}")
@@ -62,6 +70,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--strict", action="store_true", help="exit 3 if the cap is reached before convergence")
     p.set_defaults(func=_cmd_sample)
+    p = sub.add_parser("identifiability", help="which coefficients the flights determine, and the next throw")
+    p.add_argument("config", help="CONFIG.yaml (SPEC §5)")
+    p.add_argument("--profiles", action="store_true", help="also profile the likelihood of every coefficient")
+    p.add_argument("--no-design", action="store_true", help="skip the ranking of candidate throws")
+    p.add_argument("--output", help="override the config's output folder")
+    p.set_defaults(func=_cmd_identifiability)
     _register_optional(sub)
     return parser
 

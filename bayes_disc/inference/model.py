@@ -123,6 +123,12 @@ class Problem:
     # -- model ------------------------------------------------------------------------------------------
     def predict(self, theta: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Markers (B, n, n_markers, 3) of flight k for θ (B, dim), and ok flags (B,)."""
+        tr = self.simulate(theta, k, want_states=False)
+        return tr.markers, tr.ok
+
+    def simulate(self, theta: np.ndarray, k: int, want_states: bool = True):
+        """The simulator's :class:`~bayes_disc.physics.simulator.Trajectories` of flight k for θ (B, dim)
+        on the flight's sample times."""
         theta = np.atleast_2d(theta)
         f = self.flights[k]
         states = self.ic_to_state(theta[:, self.ic_slice(k)], k)
@@ -132,10 +138,9 @@ class Problem:
             settings = SimulatorSettings(method=settings.method, step_factor=settings.step_factor,
                                          omega_cap=settings.omega_cap, speed_cap=settings.speed_cap,
                                          fixed_rate=self.rates[k])
-        tr = simulate(states, theta[:, : self.n_coef], f.times, t0=f.times[0], disc=self.disc, env=self.env,
-                      marker_body=self.marker_body, terms=self.terms, extension=ext, settings=settings,
-                      want_states=False)
-        return tr.markers, tr.ok
+        return simulate(states, theta[:, : self.n_coef], f.times, t0=f.times[0], disc=self.disc, env=self.env,
+                        marker_body=self.marker_body, terms=self.terms, extension=ext, settings=settings,
+                        want_states=want_states)
 
     def residuals(self, theta: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Observed-point residuals (B, n_coords_k) [m] (predicted − measured) and ok flags."""

@@ -64,6 +64,25 @@ class ProfilePath:
         t, D = self.t, self.deviance
         return float(np.max(np.abs(D - t * t) / (1.0 + t * t / 4.0))) if t.size else 0.0
 
+    def halfwidth(self, level: float = 1.0) -> float:
+        """Half the distance between the values where the deviance crosses ``level`` on either side (linear
+        interpolation of √D; the outermost point where a side never crosses): the profile's "1 σ" for
+        level 1, which a curved or flat-topped posterior makes wider than the Laplace sd."""
+        v, D = np.array([p.value for p in self.points]), self.deviance
+        c = int(np.argmin(D))
+        ends = []
+        for side in (1, -1):
+            j = c
+            while 0 <= j + side < v.size and D[j + side] < level:
+                j += side
+            if 0 <= j + side < v.size:
+                a, b = np.sqrt(max(D[j], 0.0)), np.sqrt(D[j + side])
+                f = (np.sqrt(level) - a) / (b - a) if b > a else 1.0
+                ends.append(v[j] + f * (v[j + side] - v[j]))
+            else:
+                ends.append(v[j])
+        return float(abs(ends[0] - ends[1]) / 2)
+
     def classify(self, threshold: float = 3.84) -> str:
         """``bounded`` (deviance exceeds ``threshold`` on both sides), ``one-sided`` or ``flat``."""
         t, D = self.t, self.deviance

@@ -1,0 +1,1 @@
+"""Diagnostics of a run: identifiability of the coefficients (and, later, missing physics)."""

@@ -1,0 +1,139 @@
+"""``bayes-disc identifiability CONFIG.yaml``: least squares, Fisher information, verdicts, next throw.
+
+Writes ``<output>/identifiability.json``:
+
+    {"CL0": {"verdict", "reason"}, ..., (SPEC §6: one entry per coefficient)
+     "coefficients": {name: {verdict, reason, sd, prior_sd, contraction, relative_sd, ...}},
+     "envelope": {"flights": {flight: {alpha_deg, speed_m_s, spin_rad_s}}, "set": {...},
+                  "alpha_histogram": {"edges_deg", "counts"}},
+     "fisher": {"condition_number", "eigenvalues", "weak_directions": [{text, pair, correlation, ...}]},
+     "profiles": {name: {value, deviance, shape}} (with --profiles),
+     "posterior": {contraction, correlation, verdicts, agreement} (when `sample` has run),
+     "design": {"weak", "recommendation", "best", "ranking": [...]}}
+"""
+from __future__ import annotations
+
+import json
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ..inference.config import RunConfig
+from ..inference.data import build_problem
+from ..inference.leastsq import fit_least_squares, whitened_jacobian
+from ..inference.profile import profile_paths
+from .identifiability import (ALPHA_PAIRS, coefficient_information, describe_throw, flight_envelopes, rank_throws,
+                              verdicts_from_covariance, weak_directions)
+
+ALPHA_COEFFICIENTS = tuple(n for pair in ALPHA_PAIRS for n in pair)
+
+
+def _posterior_block(out: Path, names) -> tuple[np.ndarray, np.ndarray] | None:
+    """Mean and covariance of the coefficients in ``<out>/posterior.nc`` (None if `sample` has not run)."""
+    path = out / "posterior.nc"
+    if not path.is_file():
+        return None
+    import arviz as az
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        idata = az.from_netcdf(str(path))
+    try:
+        x = np.column_stack([idata.posterior[n].values.ravel() for n in names])
+    except KeyError:
+        return None
+    return x.mean(axis=0), np.cov(x.T)
+
+
+def run_identifiability(cfg: RunConfig, profiles: bool = False, log=print, design: bool = True) -> dict:
+    t0 = time.perf_counter()
+    out = Path(cfg.output)
+    out.mkdir(parents=True, exist_ok=True)
+    problem = build_problem(cfg)
+    nc = problem.ic_start
+    names = problem.names[:nc]
+    ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
+                           seed=cfg.sampler.seed)
+    log(f"{cfg.name}: least squares cost {ls.cost:.1f}, RMS "
+        + ", ".join(f"{n} {s * 1e3:.2f} mm" for n, s in zip(ls.flight_names, ls.sigma)))
+    # envelope
+    env = flight_envelopes(problem, ls.theta)
+    all_alpha = np.concatenate([e.alpha_deg for e in env])
+    span = (float(all_alpha.min()), float(all_alpha.max()))
+    counts, edges = np.histogram(all_alpha, bins=np.arange(np.floor(span[0] / 2) * 2 - 2, span[1] + 4, 2.0))
+    envelope = {"flights": {e.name: e.ranges() for e in env},
+                "set": {"alpha_deg": list(span),
+                        "speed_m_s": [min(e.speed.min() for e in env), max(e.speed.max() for e in env)],
+                        "spin_rad_s": [min(e.spin.min() for e in env), max(e.spin.max() for e in env)]},
+                "alpha_histogram": {"edges_deg": edges.tolist(), "counts": counts.tolist()}}
+    envelope["set"] = {k: [float(a), float(b)] for k, (a, b) in envelope["set"].items()}
+    # Fisher information with the initial conditions as nuisance
+    J = whitened_jacobian(ls.theta, problem, ls.sigma)
+    info = coefficient_information(problem, J)
+    prior_sd = problem.prior_sd[:nc]
+    Fs = info * np.outer(prior_sd, prior_sd)
+    ev = np.linalg.eigvalsh(0.5 * (Fs + Fs.T))
+    cov_coef = ls.cov[:nc, :nc]
+    fisher = {"condition_number": float(ev[-1] / max(ev[0], 1e-300)), "eigenvalues": ev.tolist(),
+              "scale": "information per prior variance (eigenvalue 1: data as informative as the prior)",
+              "weak_directions": weak_directions(info, prior_sd, cov_coef, names)}
+    # profiles
+    paths, prof = None, None
+    if profiles:
+        found = profile_paths(problem, ls.theta, ls.sigma, ls.cov, range(nc), processes=cfg.sampler.processes)
+        paths = {p.name: p for p in found}
+        prof = {p.name: {"value": [q.value for q in p.points], "deviance": p.deviance.tolist(),
+                         "shape": p.classify(), "halfwidth": p.halfwidth()} for p in found}
+    coefs = verdicts_from_covariance(names, ls.theta[:nc], cov_coef, prior_sd, span, paths)
+    result = {n: {"verdict": v["verdict"], "reason": v["reason"]} for n, v in coefs.items()}
+    result.update({"coefficients": coefs, "envelope": envelope, "fisher": fisher,
+                   "least_squares": {"cost": ls.cost, "rms_mm": {n: float(s * 1e3) for n, s in
+                                                                 zip(ls.flight_names, ls.sigma)}}})
+    if prof is not None:
+        result["profiles"] = prof
+    post = _posterior_block(out, names)
+    if post is not None:
+        mean, pcov = post
+        pv = verdicts_from_covariance(names, mean, pcov, prior_sd, span)
+        sd = np.sqrt(np.diag(pcov))
+        result["posterior"] = {
+            "contraction": {n: float(1 - sd[i] ** 2 / prior_sd[i] ** 2) for i, n in enumerate(names)},
+            "correlation": {"names": names, "matrix": (pcov / np.outer(sd, sd)).round(4).tolist()},
+            "verdicts": {n: {"verdict": v["verdict"], "reason": v["reason"]} for n, v in pv.items()},
+            "agreement": {n: pv[n]["verdict"] == coefs[n]["verdict"] for n in names}}
+    if design:
+        weak = [i for i, n in enumerate(names) if coefs[n]["verdict"] != "identified"]
+        block = weak or [i for i, n in enumerate(names) if n in ALPHA_COEFFICIENTS]
+        ranking = rank_throws(problem, ls.theta, cov_coef, block, float(np.median(ls.sigma)))
+        wn = [names[i] for i in block]
+        if ranking:
+            best = ranking[0]
+            text = describe_throw(best, wn)
+            result["design"] = {
+                "weak": wn, "block": "weak coefficients" if weak else "α coefficients (none is weak)",
+                "noise_m": float(np.median(ls.sigma)), "recommendation": text,
+                "best": {**{k: getattr(best["launch"], k) for k in ("speed", "launch_angle_deg", "alpha_deg",
+                                                                     "spin", "duration")},
+                         "gain": best["gain"], "sd_before": dict(zip(wn, best["sd_before"].tolist())),
+                         "sd_after": dict(zip(wn, best["sd_after"].tolist()))},
+                "ranking": [{**{k: getattr(r["launch"], k) for k in ("speed", "launch_angle_deg", "alpha_deg", "spin")},
+                             "gain": r["gain"]} for r in ranking[:10]]}
+    result["wall_time_s"] = time.perf_counter() - t0
+    (out / "identifiability.json").write_text(json.dumps(result, indent=1))
+    log(format_verdicts(result))
+    log(f"wrote {out / 'identifiability.json'} ({result['wall_time_s']:.0f} s)")
+    return result
+
+
+def format_verdicts(result: dict) -> str:
+    lines = [f"α over all flights {result['envelope']['set']['alpha_deg'][0]:.1f}–"
+             f"{result['envelope']['set']['alpha_deg'][1]:.1f}°; Fisher condition number "
+             f"{result['fisher']['condition_number']:.3g}"]
+    for n, v in result["coefficients"].items():
+        lines.append(f"  {n:<5} {v['verdict']:<12} {v['reason']}")
+    for w in result["fisher"]["weak_directions"][:2]:
+        lines.append(f"  weak direction: {w['text']}")
+    if "design" in result:
+        lines.append(f"next throw: {result['design']['recommendation']}")
+    return "\n".join(lines)
