@@ -1,5 +1,4 @@
 """`bayes-disc identifiability`: verdicts tied to the α range, weak directions, and the next throw."""
-import csv
 import json
 from pathlib import Path
 
@@ -9,7 +8,7 @@ import pytest
 from bayes_disc.cli import main
 from bayes_disc.inference.profile import ProfilePath, ProfilePoint
 
-from conftest import REPO
+from conftest import REPO, keep_flights
 
 COEFS = ("CL0", "CLa", "CD0", "CDa", "CM0", "CMa", "CMq", "CRr", "CRp", "CNr")
 ALPHA_COEFS = ("CL0", "CLa", "CD0", "CDa", "CM0", "CMa")
@@ -22,11 +21,7 @@ def _demo_data(folder: Path, names=None, extra_flights: str = "") -> Path:
     (folder / "synth.yaml").write_text(text)
     assert main(["synth", str(folder / "synth.yaml")]) == 0
     if names is not None:
-        rows = list(csv.reader((folder / "flights.csv").open()))
-        with (folder / "flights.csv").open("w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(rows[0])
-            w.writerows(r for r in rows[1:] if r[0] in names)
+        keep_flights(folder / "flights.csv", names)
     cfg = (REPO / "runs/demo/config.yaml").read_text().replace("truth: truth.json", "")
     (folder / "config.yaml").write_text(cfg)
     return folder / "config.yaml"

@@ -10,7 +10,7 @@ import pytest
 from bayes_disc.cli import main
 from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
 
-from conftest import REPO
+from conftest import REPO, keep_flights
 
 MARKERS_YAML = """markers:
   "0": [0.100, 0.000, -0.015]
@@ -86,12 +86,7 @@ def _demo_like(folder: Path, seed: int, names=None):
     (folder / "synth.yaml").write_text(text)
     assert main(["synth", str(folder / "synth.yaml")]) == 0
     if names is not None:
-        import csv
-        rows = list(csv.reader((folder / "flights.csv").open()))
-        with (folder / "flights.csv").open("w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(rows[0])
-            w.writerows(r for r in rows[1:] if r[0] in names)
+        keep_flights(folder / "flights.csv", names)
 
 
 # The noise draw of the shipped demo. Coverage is a property of one data set: on another draw (seed 11)

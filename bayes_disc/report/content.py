@@ -347,19 +347,60 @@ def force_curve_section(ctx) -> Section:
 
 
 def identifiability_section(ctx) -> Section:
-    data = ctx.run.extras.get("identifiability")
-    guide = ("Whether the data determine each coefficient: identified, weak or unidentified, with the reason.")
-    if not data:
-        html = ("<p class=placeholder>Not computed for this run: run <code>bayes-disc identifiability "
-                f"{esc(ctx.run.config_path)}</code> and rebuild the report.</p>")
-        return Section("identifiability", "Identifiability", guide, html)
+    """Verdicts, flight envelope, weak directions and the next throw from ``identifiability.json``
+    (``bayes-disc identifiability``), and from the posterior: contraction and correlation."""
+    data = ctx.run.extras.get("identifiability") or {}
+    guide = ("Whether the data determine each coefficient (identified, weak, unidentified) and why; which "
+             "combinations they tie together; which throw would determine the rest.")
+    parts, figs = [], []
+    prior = _prior_table(ctx.summary["prior"]["name"])
+    coefs = data.get("coefficients") or {}
+    post = ctx.summary["parameters"]
     rows = []
-    src = data.get("coefficients", data) if isinstance(data, dict) else {}
-    for name, v in src.items():
-        if isinstance(v, dict) and "verdict" in v:
-            rows.append([name, v.get("verdict"), v.get("reason", "")])
-    html = table(["coefficient", "verdict", "reason"], rows) if rows else "<p>identifiability.json has no verdicts.</p>"
-    return Section("identifiability", "Identifiability", guide, html)
+    for name in ctx.coefficients:
+        v = coefs.get(name, {})
+        p = post.get(name, {})
+        contraction = (1 - p["sd"] ** 2 / prior[name][1] ** 2) if name in prior and "sd" in p else None
+        rows.append([name, v.get("verdict", "–"), fmt(contraction, 3), v.get("reason", "–")])
+    if not coefs:
+        parts.append("<p class=placeholder>Verdicts not computed for this run: run <code>bayes-disc "
+                     f"identifiability {esc(ctx.run.config_path)}</code> (add <code>--profiles</code> for profile "
+                     "likelihoods) and rebuild the report.</p>")
+    parts.append(table(["coefficient", "verdict", "posterior contraction 1 − σ²post/σ²prior", "reason"], rows))
+    env = data.get("envelope")
+    if env:
+        parts.append("<h3>Flight envelope</h3>" + table(
+            ["flight", "α [deg]", "speed [m/s]", "spin r [rad/s]"],
+            [[f, _range(r["alpha_deg"]), _range(r["speed_m_s"]), _range(r["spin_rad_s"], 0)]
+             for f, r in {**env["flights"], "all flights": env["set"]}.items()]))
+        h = env.get("alpha_histogram")
+        if h:
+            figs.append(_figure(ctx, F.alpha_histogram_figure(h["edges_deg"], h["counts"], env["flights"]),
+                                "alpha_histogram", "Angle of attack over all samples of the fitted flights, and "
+                                "each flight's α range: the α-dependent coefficients need this spread."))
+    fisher = data.get("fisher")
+    if fisher:
+        parts.append(f"<h3>Fisher information</h3><p>Condition number {fmt(fisher['condition_number'], 3)} (scale-free: "
+                     "each coefficient in units of its prior sd; initial conditions marginalised). Least-determined "
+                     "directions:</p><ul>" + "".join(f"<li>{esc(w['text'])}</li>" for w in fisher["weak_directions"])
+                     + "</ul>")
+    prof = data.get("profiles")
+    if prof:
+        parts.append("<h3>Profile likelihood</h3>" + table(
+            ["coefficient", "shape", "half-width (deviance 1)", "points"],
+            [[n, v["shape"], fmt(v.get("halfwidth"), 3), len(v["value"])] for n, v in prof.items()]))
+    design = data.get("design")
+    if design:
+        parts.append(f"<h3>Next throw</h3><p>{esc(design['recommendation'])}</p>" + table(
+            ["rank", "speed [m/s]", "launch angle [deg]", "α at release [deg]", "spin [rad/s]", "ln volume gain"],
+            [[i + 1, fmt(r["speed"]), fmt(r["launch_angle_deg"]), fmt(r["alpha_deg"]), fmt(r["spin"]), fmt(r["gain"], 3)]
+             for i, r in enumerate(design["ranking"][:5])]))
+    samples = ctx.coefficient_samples
+    corr = np.corrcoef(samples.T)
+    figs.append(_figure(ctx, F.correlation_figure(corr, ctx.coefficients), "posterior_correlation",
+                        "Posterior correlation of the coefficients: |values| near 1 mark combinations the data "
+                        "determine only together."))
+    return Section("identifiability", "Identifiability", guide, "".join(parts), figs)
 
 
 def missing_physics_section(ctx) -> Section:

@@ -292,3 +292,42 @@ def force_curve_figure(coef: dict, alpha_range_deg, tunnel, literature: dict, tr
     fig.legend(*axes[0].get_legend_handles_labels(), loc="lower center", ncol=4, fontsize=8, frameon=False)
     fig.subplots_adjust(left=0.06, right=0.99, top=0.96, bottom=0.27, wspace=0.25)
     return fig
+
+
+# ------------------------------------------------------------------------------------------ identifiability
+def alpha_histogram_figure(edges_deg, counts, per_flight: dict) -> Figure:
+    """Histogram of α over all flights' samples, with each flight's α range as a bar below."""
+    fig = new_figure(7.0, 3.2)
+    ax = fig.add_subplot(111)
+    edges = np.asarray(edges_deg, float)
+    ax.bar(edges[:-1], counts, width=np.diff(edges), align="edge", color="tab:blue", alpha=0.6,
+           edgecolor="white", label="samples, all flights")
+    top = max(max(counts), 1)
+    for j, (name, r) in enumerate(per_flight.items()):
+        y = -0.08 * top * (j + 1)
+        lo, hi = r["alpha_deg"]
+        ax.plot([lo, hi], [y, y], lw=4, color=ENSEMBLE_COLORS[j % len(ENSEMBLE_COLORS)], solid_capstyle="butt")
+        ax.text(hi + 0.4, y, name, va="center", fontsize=8)
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set_xlabel("angle of attack α [deg]")
+    ax.set_ylabel("samples")
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def correlation_figure(corr: np.ndarray, names) -> Figure:
+    """Posterior correlation matrix of the coefficients (colour and value)."""
+    n = len(names)
+    fig = new_figure(0.55 * n + 2.0, 0.55 * n + 1.2)
+    ax = fig.add_subplot(111)
+    im = ax.imshow(corr, vmin=-1, vmax=1, cmap="RdBu_r")
+    ax.set_xticks(range(n), names, rotation=90)
+    ax.set_yticks(range(n), names)
+    for i in range(n):
+        for j in range(n):
+            ax.text(j, i, f"{corr[i, j]:.2f}", ha="center", va="center", fontsize=6,
+                    color="white" if abs(corr[i, j]) > 0.6 else "black")
+    fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="posterior correlation")
+    fig.tight_layout()
+    return fig
