@@ -23,7 +23,7 @@ from bayes_disc.report.windtunnel import load_wind_tunnel
 
 CHROMIUM = "/usr/bin/chromium"
 FIGURES = ("corner", "trace", "ranks", "residuals", "angle_of_attack", "trajectories", "posterior_predictive",
-           "force_curves")
+           "force_curves", "posterior_correlation")
 CONFIG = """name: tiny
 flights:
   - file: flights.csv

@@ -354,7 +354,8 @@ def identifiability_section(ctx) -> Section:
              "combinations they tie together; which throw would determine the rest.")
     parts, figs = [], []
     prior = _prior_table(ctx.summary["prior"]["name"])
-    coefs = data.get("coefficients") or {}
+    # the full records, or the SPEC §6 top-level {name: {verdict, reason}} alone
+    coefs = data.get("coefficients") or {k: v for k, v in data.items() if isinstance(v, dict) and "verdict" in v}
     post = ctx.summary["parameters"]
     rows = []
     for name in ctx.coefficients:
