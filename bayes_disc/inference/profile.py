@@ -28,6 +28,12 @@ from .model import Problem
 MAX_DEVIANCE = 12.0
 #: at most this many points on each side of the optimum
 MAX_POINTS = 6
+#: scipy least-squares method of the constrained fits: MINPACK's Levenberg–Marquardt (same paths as
+#: "trf" on the demo, 2.5× faster: no SVD per iteration)
+PROFILE_METHOD = "lm"
+#: a point whose deviance exceeds this multiple of the stopping deviance is a failed fit or a cliff: it
+#: still bounds the profile but is not ``ok`` (not used as a posterior approximation)
+FAILED_DEVIANCE_FACTOR = 4.0
 
 
 @dataclass
@@ -59,9 +65,10 @@ class ProfilePath:
         return np.array([p.deviance for p in self.points])
 
     def gaussian_misfit(self) -> float:
-        """Largest departure from a Gaussian profile over the path: max |D − t²| / (1 + t²/4)
+        """Largest departure from a Gaussian profile over the path's ``ok`` points: max |D − t²| / (1 + t²/4)
         (0 for an exactly Gaussian posterior; > 1 when the Laplace approximation misleads)."""
-        t, D = self.t, self.deviance
+        ok = np.array([p.ok for p in self.points], bool)
+        t, D = self.t[ok], self.deviance[ok]
         return float(np.max(np.abs(D - t * t) / (1.0 + t * t / 4.0))) if t.size else 0.0
 
     def halfwidth(self, level: float = 1.0) -> float:
@@ -102,8 +109,9 @@ def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, index: int, 
         return x
 
     res = least_squares(lambda z: whitened_residuals(embed(z), problem, sigma), x0[free],
-                        jac=lambda z: whitened_jacobian(embed(z), problem, sigma)[:, free], method="trf",
-                        x_scale=problem.prior_sd[free], max_nfev=max_nfev, xtol=1e-10, ftol=1e-10)
+                        jac=lambda z: whitened_jacobian(embed(z), problem, sigma)[:, free],
+                        method=PROFILE_METHOD, x_scale=problem.prior_sd[free], max_nfev=max_nfev, xtol=1e-10,
+                        ftol=1e-10)
     return embed(res.x), float(res.cost), bool(res.status > 0)
 
 
@@ -129,7 +137,8 @@ def profile_path(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
             cov = covariance_from_jacobian(whitened_jacobian(x_new, problem, sigma))
             dev = 2.0 * (cost - cost0)
             points.append(ProfilePoint(value=value, theta=x_new, deviance=dev, cov=cov,
-                                       t=(value - theta_hat[index]) / sd0))
+                                       t=(value - theta_hat[index]) / sd0,
+                                       ok=dev <= FAILED_DEVIANCE_FACTOR * max_deviance))
             if dev > max_deviance:
                 break
             x, step = x_new, max(float(np.sqrt(cov[index, index])), 0.5 * sd0)
