@@ -153,7 +153,8 @@ def test_sampler_agrees_with_importance_sampling(four_flights_run, four_flights)
     posterior: means within 0.25 sd, sds within 20 %. Proposal (any proposal gives an unbiased estimate):
     the run's ridge-aware independence proposal, made defensive by an equal share of a Gaussian on the
     MCMC samples' moments (sd × 1.2); weights p(θ|y)/q(θ). Two different estimators: a sampler that
-    misses part of the valley the ridge proposals cover fails it."""
+    misses part of the valley the ridge proposals cover fails it. 120 000 draws: in 58 dimensions the
+    weights are heavy-tailed (effective sample size ≈ 350 on the demo run; 45–250 from 20 000 draws)."""
     import emcee
     from bayes_disc.inference.config import load_config
     from bayes_disc.inference.data import build_problem
@@ -167,11 +168,12 @@ def test_sampler_agrees_with_importance_sampling(four_flights_run, four_flights)
     post = np.concatenate(chains)
     gauss = MixtureProposal.from_components([post.mean(axis=0)], [np.cov(post.T) * 1.2 ** 2], [0.0])
     q = CompositeProposal(q.parts + (gauss,), np.log(np.r_[0.5 * np.exp(q.log_weights), 0.5]))
-    x = q.draw(20_000, np.random.RandomState(1))
-    lw = problem.log_prob(x) - q.log_density(x)
+    random = np.random.RandomState(1)
+    x = np.concatenate([q.draw(20_000, random) for _ in range(6)])
+    lw = np.concatenate([problem.log_prob(xb) - q.log_density(xb) for xb in np.split(x, 6)])
     w = np.exp(lw - lw.max())
     w /= w.sum()
-    assert 1.0 / np.sum(w * w) > 100, "importance sampling too degenerate to serve as a check"
+    assert 1.0 / np.sum(w * w) > 200, "importance sampling too degenerate to serve as a check"
     for i, name in enumerate(summary["coefficients"]):
         m = w @ x[:, i]
         sd = np.sqrt(w @ (x[:, i] - m) ** 2)

@@ -200,18 +200,22 @@ def throw_information(problem: Problem, theta: np.ndarray, launch: LaunchSpec, s
     not fly (simulation failure or the disc below the ground)."""
     times = np.arange(int(round(launch.duration * rate_hz)) + 1) / rate_hz
     y0 = launch.initial_state()
-    obs = FlightObservation(name=launch.name, source="design", times=times, marker_ids=("0", "1", "2"),
-                            positions=np.zeros((times.size, problem.marker_body.shape[0], 3)))
-    sub = Problem(flights=[obs], marker_body=problem.marker_body, disc=problem.disc, env=problem.env,
-                  prior_name=problem.prior_name, terms=problem.terms, start_states=[y0],
-                  settings=problem.settings)
-    sub.rates = [sub.flight_rate(y0)]
+    ids = problem.flights[0].marker_ids
+
+    def one_flight(positions) -> Problem:
+        obs = FlightObservation(name=launch.name, source="design", times=times, marker_ids=ids, positions=positions)
+        sub = Problem(flights=[obs], marker_body=problem.marker_body, disc=problem.disc, env=problem.env,
+                      prior_name=problem.prior_name, terms=problem.terms, start_states=[y0],
+                      settings=problem.settings)
+        sub.rates = [sub.flight_rate(y0)]
+        return sub
+
+    sub = one_flight(np.zeros((times.size, len(ids), 3)))
     x = np.r_[theta[: problem.ic_start], sub.state_to_ic(y0, 0)]
     tr = sub.simulate(x[None], 0, want_states=True)
     if not tr.ok[0] or np.any(tr.states[0, :, 2] < 0.0):
         return None
-    sub.flights[0] = FlightObservation(obs.name, obs.source, times, obs.marker_ids, tr.markers[0])
-    sub.__post_init__()
+    sub = one_flight(tr.markers[0])   # observed = predicted: the information does not depend on the values
     J = whitened_jacobian(x, sub, np.array([sigma]))
     return coefficient_information(sub, J)
 
@@ -222,7 +226,7 @@ def rank_throws(problem: Problem, theta: np.ndarray, cov_coef: np.ndarray, weak:
     ln det Σ_weak − ln det Σ_weak,new with Σ_new = (Σ⁻¹ + F_throw)⁻¹; also each weak coefficient's sd now
     and after the throw."""
     if launches is None:
-        spins = [f.times.size and s[12] for f, s in zip(problem.flights, problem.start_states)]
+        spins = [s[12] for s in problem.start_states]        # the flights' dominant sense of spin
         launches = candidate_launches(spin_sign=1.0 if np.sum(np.sign(spins)) >= 0 else -1.0)
     P = np.linalg.inv(cov_coef)
     W = np.asarray(weak, int)
