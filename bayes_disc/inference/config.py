@@ -12,7 +12,7 @@ sampler:                 # emcee settings
   n_tau: 10              # stop when every chain is ≥ n_tau · τ long (τ: emcee's estimator) ...
   rhat: 1.01             # ... R-hat across ensembles is below this ...
   ess: 400               # ... and every coefficient's bulk ESS reaches this
-  independence_fraction: 0.3   # share of the mixture-independence and pCN moves (rest: DE moves)
+  independence_fraction: 0.3   # share of the independence (ridge-aware) and pCN moves (rest: DE moves)
   adapt_steps: 150       # warm-up: the pCN reference is re-fitted after 150 and 300 steps
   seed: 1
   processes: 2           # ensembles run in parallel processes

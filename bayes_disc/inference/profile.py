@@ -10,7 +10,7 @@ least-squares values):
 The path θ*(v) follows the posterior's ridge: where the posterior is a thin curved valley (a weakly
 identified combination such as CM0 + CMq·q̄ with the flights' wobble initial conditions), the Laplace
 approximation at θ̂ is far too narrow and the path shows where the mass really lies. At every point the
-local Gauss–Newton covariance is kept, so the path can seed a mixture proposal for the sampler
+local Gauss–Newton covariance is kept, so the path can seed a ridge proposal for the sampler
 (:mod:`.sampler`) and profile verdicts for identifiability.
 """
 from __future__ import annotations

@@ -20,6 +20,7 @@ ratio is exact and the posterior stays invariant whatever the proposal's quality
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -133,16 +134,19 @@ class MixtureProposal:
         cov = np.einsum("k,kij,klj->il", w, self.chols, self.chols) + (dev.T * w) @ dev
         return mean, 0.5 * (cov + cov.T)
 
+    @cached_property
+    def _whitening(self):
+        """(stacked L_k⁻¹ (K·dim, dim), L_k⁻¹ m_k (K, dim), ln w_k − ln|L_k| (K,))."""
+        K, d = self.means.shape
+        inv = np.array([solve_triangular(L, np.eye(d), lower=True) for L in self.chols])
+        const = self.log_weights - np.log(np.diagonal(self.chols, axis1=1, axis2=2)).sum(axis=1)
+        return inv.reshape(K * d, d), np.einsum("kij,kj->ki", inv, self.means), const
+
     def log_density(self, x: np.ndarray) -> np.ndarray:
         """ln q(x) for x (n, dim): all components' whitened offsets L_k⁻¹(x − m_k) in one matrix product."""
         x = np.atleast_2d(x)
         K, d = self.means.shape
-        if not hasattr(self, "_inv"):
-            inv = np.array([solve_triangular(L, np.eye(d), lower=True) for L in self.chols])
-            shift = np.einsum("kij,kj->ki", inv, self.means)
-            const = self.log_weights - np.log(np.diagonal(self.chols, axis1=1, axis2=2)).sum(axis=1)
-            object.__setattr__(self, "_inv", (inv.reshape(K * d, d), shift, const))
-        inv, shift, const = self._inv
+        inv, shift, const = self._whitening
         z = (inv @ x.T).reshape(K, d, -1) - shift[:, :, None]
         out = const[:, None] - 0.5 * np.einsum("kdn,kdn->kn", z, z)
         return np.logaddexp.reduce(out, axis=0) - 0.5 * d * np.log(2 * np.pi)
