@@ -75,16 +75,53 @@ def test_mirrored_throw_gives_mirrored_path():
     assert np.abs(a.states[0, -1, 1]) > 0.05
 
 
-@pytest.mark.parametrize("terms", [(), ("side_force", "wind")])
+#: parameter values that make each term's effect clearly visible over 1.5 s
+TERM_VALUES = {"side_force": [0.3], "wind": [1.5, -2.0, 0.3], "ground_effect": [0.4, 0.2],
+               "nonlinear_aero": [-1.5, 1.0, 0.3], "spin_lift": [0.3], "roll_spin_coupling": [0.02]}
+
+
+@pytest.mark.parametrize("terms", [(), ("side_force", "wind"), ("ground_effect",), ("nonlinear_aero",),
+                                   ("spin_lift", "roll_spin_coupling")])
 def test_kernel_agrees_with_solve_ivp_dop853(terms):
     y0 = _state(pqr=(4.0, -3.0, 50.0))
     t = np.arange(0, 181) / 120.0 + 0.3
+    ext = np.array([v for name in terms for v in TERM_VALUES[name]])
     terms = get_terms(terms)
-    ext = np.array([0.3, 1.5, -2.0, 0.3])[: sum(len(x.parameters) for x in terms)]
     fast = simulate(y0, HUMMEL, t, t0=0.3, marker_body=MARKERS, terms=terms, extension=ext if ext.size else None)
     ref = simulate_reference(y0, HUMMEL, t, t0=0.3, marker_body=MARKERS, terms=terms,
                              extension=ext if ext.size else None)
     assert np.abs(fast.markers - ref.markers).max() < 1e-6
+
+
+@pytest.mark.parametrize("name", sorted(TERM_VALUES))
+def test_every_term_is_off_at_its_off_value_and_changes_the_flight_otherwise(name):
+    (term,) = get_terms([name])
+    y0 = _state(pqr=(0.0, 0.0, 50.0))
+    t = np.arange(121) / 120.0
+    base = simulate(y0, HUMMEL, t, marker_body=MARKERS)
+    off = simulate(y0, HUMMEL, t, marker_body=MARKERS, terms=(term,), extension=[p.off_value for p in term.parameters])
+    on = simulate(y0, HUMMEL, t, marker_body=MARKERS, terms=(term,), extension=TERM_VALUES[name])
+    assert np.abs(off.markers - base.markers).max() < 1e-12
+    assert np.abs(on.markers - base.markers).max() > 0.01, name   # > 1 cm after 1 s
+    assert term.equations and all(p.unit and p.prior_sd > 0 for p in term.parameters)
+    # extra lift lifts the disc, less lift drops it (final height of the centre of mass)
+    sign = {"spin_lift": 1, "nonlinear_aero": -1}.get(name)
+    if sign is not None:
+        assert sign * (on.markers[0, -1, :, 2].mean() - base.markers[0, -1, :, 2].mean()) > 0.005, name
+
+
+def test_ground_effect_acts_near_the_ground_only():
+    """Extra lift e^(−z/d): a disc skimming at 0.3 m rises against the base model; at 3 m it barely differs."""
+    (term,) = get_terms(["ground_effect"])
+    t = np.arange(61) / 120.0
+    rise = []
+    for z0 in (0.3, 3.0):
+        y0 = _state(pqr=(0.0, 0.0, 50.0))
+        y0[2] = z0
+        base = simulate(y0, HUMMEL, t, marker_body=MARKERS)
+        on = simulate(y0, HUMMEL, t, marker_body=MARKERS, terms=(term,), extension=[0.4, 0.0])
+        rise.append(on.markers[0, -1, :, 2].mean() - base.markers[0, -1, :, 2].mean())
+    assert rise[0] > 0.005 and abs(rise[1]) < 0.1 * rise[0], rise
 
 
 def test_terms_change_the_flight():

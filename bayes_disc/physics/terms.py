@@ -18,6 +18,7 @@ d1, d2, d3 (world components), p, q, r [rad/s], A [m²], d [m], m [kg], ρ [kg/m
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -102,7 +103,121 @@ WIND = Term(
 )
 
 
-TERMS: dict[str, Term] = {t.id: t for t in (SIDE_FORCE, WIND)}
+# --- shared geometry --------------------------------------------------------------------------------
+
+@nb.njit(inline="always", cache=True)
+def _unit_air(ctx):
+    """v̂_a = v_a / |v_a| (world; zero at rest)."""
+    s = ctx[CTX_SPEED]
+    inv = 1.0 / s if s > 0.0 else 0.0
+    return ctx[CTX_VAX] * inv, ctx[CTX_VAY] * inv, ctx[CTX_VAZ] * inv
+
+
+@nb.njit(inline="always", cache=True)
+def _lift_direction(ctx):
+    """d2 × v̂_a (world): the lift direction of SPEC §2 (perpendicular to v_a, toward the top side)."""
+    ax, ay, az = _unit_air(ctx)
+    d2x, d2y, d2z = ctx[CTX_D2X], ctx[CTX_D2Y], ctx[CTX_D2Z]
+    return d2y * az - d2z * ay, d2z * ax - d2x * az, d2x * ay - d2y * ax
+
+
+@nb.njit(inline="always", cache=True)
+def _advance_ratio(ctx):
+    """μ = r d / 2|v_a| (spin rim speed over air speed; zero at rest)."""
+    s = ctx[CTX_SPEED]
+    return ctx[CTX_R] * ctx[CTX_DIAM] / (2.0 * s) if s > 0.0 else 0.0
+
+
+# --- ground effect -------------------------------------------------------------------------------------
+
+@nb.njit(inline="always", cache=True)
+def _ground_effect_loads(E, off, b, ctx):
+    """ΔL = ΔC_L,ge · e^(−z/d) · Q A along d2 × v̂_a;  ΔD = ΔC_D,ge · e^(−z/d) · Q A along −v̂_a."""
+    g = math.exp(-ctx[CTX_Z] / ctx[CTX_DIAM]) * ctx[CTX_Q] * ctx[CTX_AREA]
+    lift, drag = E[off, b] * g, E[off + 1, b] * g
+    lx, ly, lz = _lift_direction(ctx)
+    ax, ay, az = _unit_air(ctx)
+    return (lift * lx - drag * ax, lift * ly - drag * ay, lift * lz - drag * az, 0.0, 0.0, 0.0)
+
+
+GROUND_EFFECT = Term(
+    id="ground_effect",
+    title="Ground effect: lift and drag change close to the ground, fading over about one diameter",
+    equations="ΔL = ΔC_L,ge · exp(−z/d) · Q A  (along d2 × v̂_a),  ΔD = ΔC_D,ge · exp(−z/d) · Q A  (along −v̂_a); "
+    "z: height of the centre of mass above the ground plane z = 0, d: diameter",
+    parameters=(TermParameter("CL_ge", "1", "lift change at the ground (z = 0)", prior_sd=0.3),
+                TermParameter("CD_ge", "1", "drag change at the ground (z = 0)", prior_sd=0.2)),
+    loads=_ground_effect_loads,
+)
+
+
+# --- non-linear angle-of-attack dependence -------------------------------------------------------------
+
+@nb.njit(inline="always", cache=True)
+def _nonlinear_aero_loads(E, off, b, ctx):
+    """ΔC_L = C_L2 α², ΔC_D = C_D3 |α|³, ΔC_M = C_M2 α² (α in rad), forces × Q A, moment × Q A d about d2."""
+    a = ctx[CTX_ALPHA]
+    qa = ctx[CTX_Q] * ctx[CTX_AREA]
+    lift = E[off, b] * a * a * qa
+    drag = E[off + 1, b] * abs(a) * a * a * qa
+    pitch = E[off + 2, b] * a * a * qa * ctx[CTX_DIAM]
+    lx, ly, lz = _lift_direction(ctx)
+    ax, ay, az = _unit_air(ctx)
+    return (lift * lx - drag * ax, lift * ly - drag * ay, lift * lz - drag * az,
+            pitch * ctx[CTX_D2X], pitch * ctx[CTX_D2Y], pitch * ctx[CTX_D2Z])
+
+
+NONLINEAR_AERO = Term(
+    id="nonlinear_aero",
+    title="Angle-of-attack dependence beyond linear lift, quadratic drag and linear pitching moment",
+    equations="C_L = C_L0 + C_Lα α + C_L2 α²,  C_D = C_D0 + C_Dα α² + C_D3 |α|³,  C_M = C_M0 + C_Mα α + C_Mq q + C_M2 α² "
+    "(the wind-tunnel table bends this way: lift saturates, drag and pitching moment grow faster at high α)",
+    parameters=(TermParameter("CL2", "1/rad²", "quadratic lift term", prior_sd=2.0),
+                TermParameter("CD3", "1/rad³", "cubic drag term", prior_sd=2.0),
+                TermParameter("CM2", "1/rad²", "quadratic pitching-moment term", prior_sd=0.5)),
+    loads=_nonlinear_aero_loads,
+)
+
+
+# --- spin-dependent lift ---------------------------------------------------------------------------------
+
+@nb.njit(inline="always", cache=True)
+def _spin_lift_loads(E, off, b, ctx):
+    """ΔL = C_Lr · μ · Q A along d2 × v̂_a,  μ = r d / 2|v_a|."""
+    lift = E[off, b] * _advance_ratio(ctx) * ctx[CTX_Q] * ctx[CTX_AREA]
+    lx, ly, lz = _lift_direction(ctx)
+    return (lift * lx, lift * ly, lift * lz, 0.0, 0.0, 0.0)
+
+
+SPIN_LIFT = Term(
+    id="spin_lift",
+    title="Lift that grows with the spin's advance ratio r d / 2|v_a|",
+    equations="ΔL = C_Lr · (r d / 2|v_a|) · Q A  (along d2 × v̂_a)",
+    parameters=(TermParameter("CLr", "1", "lift per unit advance ratio", prior_sd=0.5),),
+    loads=_spin_lift_loads,
+)
+
+
+# --- roll moment coupled to the advance ratio --------------------------------------------------------------
+
+@nb.njit(inline="always", cache=True)
+def _roll_spin_loads(E, off, b, ctx):
+    """ΔR = C_Rμ · μ · Q A d about d1,  μ = r d / 2|v_a|."""
+    roll = E[off, b] * _advance_ratio(ctx) * ctx[CTX_Q] * ctx[CTX_AREA] * ctx[CTX_DIAM]
+    return (0.0, 0.0, 0.0, roll * ctx[CTX_D1X], roll * ctx[CTX_D1Y], roll * ctx[CTX_D1Z])
+
+
+ROLL_SPIN_COUPLING = Term(
+    id="roll_spin_coupling",
+    title="Roll moment depending on the advance ratio r d / 2|v_a|",
+    equations="ΔR = C_Rμ · (r d / 2|v_a|) · Q A d  (about d1)",
+    parameters=(TermParameter("CRmu", "1", "roll moment per unit advance ratio", prior_sd=0.05),),
+    loads=_roll_spin_loads,
+)
+
+
+TERMS: dict[str, Term] = {t.id: t for t in (SIDE_FORCE, WIND, GROUND_EFFECT, NONLINEAR_AERO, SPIN_LIFT,
+                                             ROLL_SPIN_COUPLING)}
 
 
 def get_terms(ids) -> tuple[Term, ...]:
