@@ -128,16 +128,22 @@ def _advance_ratio(ctx):
     return ctx[CTX_R] * ctx[CTX_DIAM] / (2.0 * s) if s > 0.0 else 0.0
 
 
+@nb.njit(inline="always", cache=True)
+def _lift_drag_force(ctx, lift, drag):
+    """World force [N] of a lift ``lift`` along d2 × v̂_a and a drag ``drag`` along −v̂_a."""
+    lx, ly, lz = _lift_direction(ctx)
+    ax, ay, az = _unit_air(ctx)
+    return lift * lx - drag * ax, lift * ly - drag * ay, lift * lz - drag * az
+
+
 # --- ground effect -------------------------------------------------------------------------------------
 
 @nb.njit(inline="always", cache=True)
 def _ground_effect_loads(E, off, b, ctx):
     """ΔL = ΔC_L,ge · e^(−z/d) · Q A along d2 × v̂_a;  ΔD = ΔC_D,ge · e^(−z/d) · Q A along −v̂_a."""
     g = math.exp(-ctx[CTX_Z] / ctx[CTX_DIAM]) * ctx[CTX_Q] * ctx[CTX_AREA]
-    lift, drag = E[off, b] * g, E[off + 1, b] * g
-    lx, ly, lz = _lift_direction(ctx)
-    ax, ay, az = _unit_air(ctx)
-    return (lift * lx - drag * ax, lift * ly - drag * ay, lift * lz - drag * az, 0.0, 0.0, 0.0)
+    fx, fy, fz = _lift_drag_force(ctx, E[off, b] * g, E[off + 1, b] * g)
+    return (fx, fy, fz, 0.0, 0.0, 0.0)
 
 
 GROUND_EFFECT = Term(
@@ -158,13 +164,9 @@ def _nonlinear_aero_loads(E, off, b, ctx):
     """ΔC_L = C_L2 α², ΔC_D = C_D3 |α|³, ΔC_M = C_M2 α² (α in rad), forces × Q A, moment × Q A d about d2."""
     a = ctx[CTX_ALPHA]
     qa = ctx[CTX_Q] * ctx[CTX_AREA]
-    lift = E[off, b] * a * a * qa
-    drag = E[off + 1, b] * abs(a) * a * a * qa
+    fx, fy, fz = _lift_drag_force(ctx, E[off, b] * a * a * qa, E[off + 1, b] * abs(a) * a * a * qa)
     pitch = E[off + 2, b] * a * a * qa * ctx[CTX_DIAM]
-    lx, ly, lz = _lift_direction(ctx)
-    ax, ay, az = _unit_air(ctx)
-    return (lift * lx - drag * ax, lift * ly - drag * ay, lift * lz - drag * az,
-            pitch * ctx[CTX_D2X], pitch * ctx[CTX_D2Y], pitch * ctx[CTX_D2Z])
+    return (fx, fy, fz, pitch * ctx[CTX_D2X], pitch * ctx[CTX_D2Y], pitch * ctx[CTX_D2Z])
 
 
 NONLINEAR_AERO = Term(
@@ -184,9 +186,8 @@ NONLINEAR_AERO = Term(
 @nb.njit(inline="always", cache=True)
 def _spin_lift_loads(E, off, b, ctx):
     """ΔL = C_Lr · μ · Q A along d2 × v̂_a,  μ = r d / 2|v_a|."""
-    lift = E[off, b] * _advance_ratio(ctx) * ctx[CTX_Q] * ctx[CTX_AREA]
-    lx, ly, lz = _lift_direction(ctx)
-    return (lift * lx, lift * ly, lift * lz, 0.0, 0.0, 0.0)
+    fx, fy, fz = _lift_drag_force(ctx, E[off, b] * _advance_ratio(ctx) * ctx[CTX_Q] * ctx[CTX_AREA], 0.0)
+    return (fx, fy, fz, 0.0, 0.0, 0.0)
 
 
 SPIN_LIFT = Term(
