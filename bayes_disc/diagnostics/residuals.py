@@ -48,10 +48,10 @@ def flight_residuals(problem: Problem, theta: np.ndarray) -> list[FlightResidual
     for k, f in enumerate(problem.flights):
         tr = problem.simulate(theta[None], k, want_states=True)
         st, pred = tr.states[0], tr.markers[0]
-        res = f.positions - pred                                   # (n, m, 3), NaN where unseen
-        n_seen = np.sum(f.observed, axis=1)
-        with np.errstate(invalid="ignore"):
-            r = np.nanmean(np.where(f.observed[..., None], res, np.nan), axis=1) if n_seen.any() else res[:, 0]
+        seen = f.observed                                          # (n, m)
+        n_seen = np.sum(seen, axis=1)
+        total = np.sum(np.where(seen[..., None], f.positions - pred, 0.0), axis=1)
+        r = np.where(n_seen[:, None] > 0, total / np.maximum(n_seen, 1)[:, None], np.nan)   # (n, 3)
         v = st[:, 3:6]
         t_hat = v / np.linalg.norm(v, axis=1, keepdims=True)
         s = np.cross(np.array([0.0, 0.0, 1.0]), t_hat)

@@ -28,56 +28,44 @@ from scipy.linalg import solve_triangular
 
 from .model import Problem
 
-# A Student-t proposal is no good in ~60 dimensions: its radius spreads far more than the posterior's,
-# so the importance weights vary by e^±10 and almost nothing is accepted. Gaussian (ν = ∞) it is.
-T_DOF = np.inf
-PROPOSAL_INFLATION = 1.03  # proposal sd / posterior sd after adaptation (slightly wider: safe tails)
+#: proposal sd / posterior sd after a warm-up re-fit (slightly wider: safe tails)
+PROPOSAL_INFLATION = 1.03
 
 
 @dataclass(frozen=True)
 class Proposal:
-    """Gaussian reference N(μ, Σ), Σ = L Lᵀ (a Student-t with ν dof when ν is finite), used as a
-    preconditioned Crank–Nicolson proposal x′ = μ + ρ (x − μ) + √(1 − ρ²) L z, z ~ N(0, I).
+    """Gaussian reference N(μ, Σ), Σ = L Lᵀ, used as a preconditioned Crank–Nicolson proposal
+    x′ = μ + ρ (x − μ) + √(1 − ρ²) L z, z ~ N(0, I).
 
     ρ = 0 is the independence sampler; ρ > 0 makes a local move that is reversible with respect to
     the Gaussian, so its Metropolis–Hastings factor is the same density ratio N(x) / N(x′)
-    (Cotter et al. 2013). Where the posterior deviates from the Gaussian, ρ > 0 keeps acceptance high
-    while ρ = 0 makes the big jumps. (Gaussian only: with finite ν the factor holds for ρ = 0.)"""
+    (Cotter et al. 2013). (A Student-t reference is no good in ~60 dimensions: its radius spreads far
+    more than the posterior's, and the pCN factor would not hold for it.)"""
 
     mean: np.ndarray
     chol: np.ndarray
-    dof: float = T_DOF
     adapted: int = 0   # how many warm-up re-fits this proposal has had
     rho: float = 0.0
 
     def with_rho(self, rho: float) -> "Proposal":
-        return Proposal(self.mean, self.chol, self.dof, self.adapted, rho)
+        return Proposal(self.mean, self.chol, self.adapted, rho)
 
     @classmethod
-    def from_cov(cls, mean, cov, dof=T_DOF, adapted=0) -> "Proposal":
-        """Proposal whose covariance is ``cov`` (t: scale matrix cov·(ν−2)/ν)."""
-        cov = 0.5 * (cov + cov.T) * (1.0 if np.isinf(dof) else (dof - 2.0) / dof)
-        return cls(mean=np.asarray(mean, float), chol=scaled_cholesky(cov), dof=dof, adapted=adapted)
+    def from_cov(cls, mean, cov, adapted=0) -> "Proposal":
+        return cls(mean=np.asarray(mean, float), chol=scaled_cholesky(0.5 * (cov + cov.T)), adapted=adapted)
 
     def refit(self, samples: np.ndarray) -> "Proposal":
         """The proposal re-fitted to samples (n, dim): their mean and inflated covariance."""
         cov = np.cov(samples.T) * PROPOSAL_INFLATION**2
-        return Proposal.from_cov(samples.mean(axis=0), cov, self.dof, self.adapted + 1)
+        return Proposal.from_cov(samples.mean(axis=0), cov, self.adapted + 1)
 
     def log_density(self, x: np.ndarray) -> np.ndarray:
-        z = np.linalg.solve(self.chol, (x - self.mean).T).T
-        if np.isinf(self.dof):
-            return -0.5 * np.sum(z * z, axis=1)
-        d = self.mean.size
-        return -0.5 * (self.dof + d) * np.log1p(np.sum(z * z, axis=1) / self.dof)
+        """ln N(x) up to its constant, for x (n, dim)."""
+        z = solve_triangular(self.chol, (x - self.mean).T, lower=True)
+        return -0.5 * np.sum(z * z, axis=0)
 
     def draw(self, n: int, random) -> np.ndarray:
-        d = self.mean.size
-        z = random.randn(n, d)
-        if np.isinf(self.dof):
-            return self.mean + z @ self.chol.T
-        g = random.chisquare(self.dof, size=n) / self.dof
-        return self.mean + (z @ self.chol.T) / np.sqrt(g)[:, None]
+        return self.mean + random.randn(n, self.mean.size) @ self.chol.T
 
     def __call__(self, coords, random):
         """emcee MHMove proposal: new points and ln q(x | x′) − ln q(x′ | x) = ln N(x) − ln N(x′)."""
@@ -89,12 +77,12 @@ class Proposal:
         return new, self.log_density(coords) - self.log_density(new)
 
     def save(self, path: Path) -> None:
-        np.savez(path, mean=self.mean, chol=self.chol, dof=self.dof, adapted=self.adapted)
+        np.savez(path, mean=self.mean, chol=self.chol, adapted=self.adapted)
 
     @classmethod
     def load(cls, path: Path) -> "Proposal":
         z = np.load(path)
-        return cls(mean=z["mean"], chol=z["chol"], dof=float(z["dof"]), adapted=int(z["adapted"]))
+        return cls(mean=z["mean"], chol=z["chol"], adapted=int(z["adapted"]))
 
 
 def scaled_cholesky(cov: np.ndarray) -> np.ndarray:
