@@ -4,7 +4,7 @@ import numpy as np
 from bayes_disc.inference.leastsq import fit_least_squares
 from bayes_disc.inference.model import Problem
 from bayes_disc.inference.initial import initial_state_from_data
-from bayes_disc.diagnostics.residuals import DIRECTIONS, localise, ljung_box, structured_windows
+from bayes_disc.diagnostics.residuals import DIRECTIONS, ROTATIONS, localise, ljung_box, structured_windows
 from bayes_disc.observation.synth import DEFAULT_MARKERS, LaunchSpec, SynthSpec, synthesize
 
 
@@ -44,7 +44,10 @@ def _fit_base(physics):
 def test_no_missing_physics_leaves_white_residuals():
     problem, ls = _fit_base({})
     loc = localise(problem, ls.theta, ls.sigma)
-    assert all(set(per) == set(DIRECTIONS) for per in loc.values())
+    assert all(set(per) == set(DIRECTIONS) | set(ROTATIONS) for per in loc.values())
     p = [d["ljung_box_p"] for per in loc.values() for d in per.values()]
     assert min(p) > 1e-4, p
-    assert all(abs(d["rms_mm"] - 1.0 / np.sqrt(3)) < 0.25 for per in loc.values() for d in per.values())
+    assert all(abs(per[n]["rms_mm"] - 1.0 / np.sqrt(3)) < 0.25 for per in loc.values() for n in DIRECTIONS)
+    # attitude residuals: pure noise, so their RMS is what the markers' noise predicts
+    ratios = [per[n]["noise_ratio"] for per in loc.values() for n in DIRECTIONS + ROTATIONS]
+    assert all(0.8 < r < 1.2 for r in ratios), ratios

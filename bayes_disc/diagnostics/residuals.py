@@ -7,6 +7,14 @@ component) and projected on two frames:
 * flight path: along-track t̂ = v̂, lateral ŝ = (ẑ × v̂)/|ẑ × v̂| (to the left), normal n̂ = t̂ × ŝ (up);
 * disc (velocity-aligned D frame of SPEC §1): d1, d2 (to the right), d3 = b3 (down through the disc).
 
+The markers' spread about their mean carries the attitude residual: the small rotation δθ [rad] that
+best maps the predicted lever arms p̃_j = p_j − p̄ onto the measured ones,
+
+    δθ = (Σ_j |p̃_j|² I − p̃_j p̃_jᵀ)⁻¹ Σ_j p̃_j × (r_j − r̄),
+
+projected as roll (about d1), pitch (about d2) and spin phase (about d3). A fit that cannot reproduce
+the motion often hides a missing force in the attitude, so these series matter as much as r̄.
+
 Per flight and direction: RMS [mm]; whiteness — autocorrelation and the Ljung–Box statistic
 Q = n(n+2) Σ_{k=1..h} ρ_k² / (n − k) with its χ²_h p-value (white residuals: p uniform; structure: p → 0);
 the time windows where the running mean strays beyond 3 standard errors; and the correlation of the
@@ -23,6 +31,7 @@ from ..inference.model import Problem
 from ..physics.frames import angle_of_attack, quat_to_matrix
 
 DIRECTIONS = ("along", "lateral", "normal", "d1", "d2", "d3")
+ROTATIONS = ("roll", "pitch", "spin_phase")
 #: lags of the Ljung–Box statistic (about 0.1 s at 120 Hz)
 LJUNG_BOX_LAGS = 12
 #: running-mean window [samples] of the structure search
@@ -41,6 +50,35 @@ class FlightResiduals:
     n_seen: np.ndarray
     projections: dict
     covariates: dict
+    rotations: dict      # {roll, pitch, spin_phase: (n,)} attitude residual [rad] (NaN unless all markers seen)
+    unit_se: dict        # {series: (n,)} standard error of each series per unit marker noise σ [1 or rad/m]
+
+
+def flight_axes(states: np.ndarray) -> dict:
+    """Unit vectors (n, 3) of the flight-path frame (along, lateral, normal) and the D frame (d1, d2, d3)
+    along states (n, 13)."""
+    v = states[:, 3:6]
+    t_hat = v / np.linalg.norm(v, axis=1, keepdims=True)
+    s = np.cross(np.array([0.0, 0.0, 1.0]), t_hat)
+    s_hat = s / np.linalg.norm(s, axis=1, keepdims=True)
+    n_hat = np.cross(t_hat, s_hat)
+    d3 = quat_to_matrix(states[:, 6:10])[:, :, 2]                # b3 (world), D frame of SPEC §1
+    v_perp = v - np.einsum("ni,ni->n", v, d3)[:, None] * d3
+    d1 = v_perp / np.linalg.norm(v_perp, axis=1, keepdims=True)
+    return {"along": t_hat, "lateral": s_hat, "normal": n_hat, "d1": d1, "d2": np.cross(d3, d1), "d3": d3}
+
+
+def marker_series(diff: np.ndarray, states: np.ndarray, markers: np.ndarray, seen: np.ndarray):
+    """Series of a per-marker difference ``diff`` (n, m, 3) [m] (NaN-free where ``seen``): the marker mean
+    r̄ (n, 3), its projections {direction: (n,)}, the attitude angles {rotation: (n,)} [rad] and their unit
+    standard errors, given the predicted states (n, 13) and markers (n, m, 3)."""
+    n_seen = np.sum(seen, axis=1)
+    total = np.sum(np.where(seen[..., None], diff, 0.0), axis=1)
+    r = np.where(n_seen[:, None] > 0, total / np.maximum(n_seen, 1)[:, None], np.nan)   # (n, 3)
+    axes = flight_axes(states)
+    proj = {name: np.einsum("ni,ni->n", r, axis) for name, axis in axes.items()}
+    rot, rot_se = _attitude_residual(np.where(seen[..., None], diff, 0.0), markers - states[:, None, 0:3], seen, axes)
+    return r, proj, rot, rot_se
 
 
 def flight_residuals(problem: Problem, theta: np.ndarray) -> list[FlightResiduals]:
@@ -50,22 +88,33 @@ def flight_residuals(problem: Problem, theta: np.ndarray) -> list[FlightResidual
         st, pred = tr.states[0], tr.markers[0]
         seen = f.observed                                          # (n, m)
         n_seen = np.sum(seen, axis=1)
-        total = np.sum(np.where(seen[..., None], f.positions - pred, 0.0), axis=1)
-        r = np.where(n_seen[:, None] > 0, total / np.maximum(n_seen, 1)[:, None], np.nan)   # (n, 3)
+        r, proj, rot, rot_se = marker_series(f.positions - pred, st, pred, seen)
         v = st[:, 3:6]
-        t_hat = v / np.linalg.norm(v, axis=1, keepdims=True)
-        s = np.cross(np.array([0.0, 0.0, 1.0]), t_hat)
-        s_hat = s / np.linalg.norm(s, axis=1, keepdims=True)
-        n_hat = np.cross(t_hat, s_hat)
-        d3 = quat_to_matrix(st[:, 6:10])[:, :, 2]                   # b3 (world), D frame of SPEC §1
-        v_perp = v - np.einsum("ni,ni->n", v, d3)[:, None] * d3
-        d1 = v_perp / np.linalg.norm(v_perp, axis=1, keepdims=True)
-        axes = {"along": t_hat, "lateral": s_hat, "normal": n_hat, "d1": d1, "d2": np.cross(d3, d1), "d3": d3}
-        proj = {name: np.einsum("ni,ni->n", r, axis) for name, axis in axes.items()}
         cov = {"alpha": angle_of_attack(v, st[:, 6:10]), "speed": np.linalg.norm(v, axis=1), "spin": st[:, 12],
                "height": st[:, 2], "time": f.times - f.times[0]}
-        out.append(FlightResiduals(f.name, f.times, r, n_seen, proj, cov))
+        unit_se = {name: 1.0 / np.sqrt(np.maximum(n_seen, 1)) for name in DIRECTIONS} | rot_se
+        out.append(FlightResiduals(f.name, f.times, r, n_seen, proj, cov, rot, unit_se))
     return out
+
+
+def _attitude_residual(res: np.ndarray, arms: np.ndarray, seen: np.ndarray, axes: dict) -> tuple[dict, dict]:
+    """Attitude residual δθ (module docstring) at samples where every marker is seen, projected on d1, d2,
+    d3; and its standard error per unit marker noise. res, arms: (n, m, 3) [m]; seen (n, m)."""
+    n, m, _ = res.shape
+    full = np.all(seen, axis=1) & (m >= 3)
+    p = arms - arms.mean(axis=1, keepdims=True)
+    d = res - res.mean(axis=1, keepdims=True)
+    A = np.einsum("njc,njc->n", p, p)[:, None, None] * np.eye(3) - np.einsum("nji,njk->nik", p, p)
+    b = np.cross(p, d).sum(axis=1)
+    A = np.where(full[:, None, None], A, np.eye(3))
+    theta = np.linalg.solve(A, b[..., None])[..., 0]
+    Ainv = np.linalg.inv(A)
+    rot, se = {}, {}
+    for name, axis in zip(ROTATIONS, ("d1", "d2", "d3")):
+        a = axes[axis]
+        rot[name] = np.where(full, np.einsum("ni,ni->n", theta, a), np.nan)
+        se[name] = np.sqrt(np.einsum("ni,nik,nk->n", a, Ainv, a))
+    return rot, se
 
 
 def ljung_box(x: np.ndarray, lags: int = LJUNG_BOX_LAGS) -> tuple[float, float]:
@@ -101,22 +150,52 @@ def structured_windows(x: np.ndarray, se: np.ndarray, times: np.ndarray, window:
     return out
 
 
-def localise(problem: Problem, theta: np.ndarray, sigma: np.ndarray) -> dict:
-    """Per flight and direction: RMS [mm], Ljung–Box Q and p, structured windows, correlations with the
-    flight's covariates. ``sigma``: each flight's noise scale [m] (per coordinate)."""
+def peak_window(fr: FlightResiduals, sigma: float, window: int = WINDOW) -> list:
+    """[t0, t1] [s] around the strongest residual structure of a flight: the running mean (``window``
+    samples) of the whitened squared translation residuals Σ (r̄·e / se)² over along, lateral and normal,
+    where it stays above half its maximum around the maximum."""
+    z = np.zeros(fr.times.size)
+    for name in ("along", "lateral", "normal"):
+        x = fr.projections[name] / (sigma * fr.unit_se[name])
+        z += np.where(np.isfinite(x), x * x, 0.0)
+    run = np.convolve(z, np.ones(window) / window, "same")
+    i = int(np.argmax(run))
+    above = run >= 0.5 * run[i]
+    lo, hi = i, i
+    while lo > 0 and above[lo - 1]:
+        lo -= 1
+    while hi < run.size - 1 and above[hi + 1]:
+        hi += 1
+    return [float(fr.times[lo]), float(fr.times[hi])]
+
+
+def series_of(fr: FlightResiduals) -> dict:
+    """All residual series of a flight: the six translation directions [m] and three rotations [rad]."""
+    return fr.projections | fr.rotations
+
+
+def localise(problem: Problem, theta: np.ndarray, sigma: np.ndarray, residuals: list | None = None) -> dict:
+    """Per flight and series (directions and rotations): RMS (``rms_mm`` or ``rms_mrad``), its ratio to the
+    RMS that noise alone would give, Ljung–Box Q and p, structured windows [s], correlations with the
+    flight's covariates. ``sigma``: each flight's noise scale [m] (per coordinate); ``residuals``: the
+    :func:`flight_residuals` of θ if already computed."""
+    residuals = flight_residuals(problem, theta) if residuals is None else residuals
     out = {}
-    for fr, s in zip(flight_residuals(problem, theta), sigma):
-        se = s / np.sqrt(np.maximum(fr.n_seen, 1))
+    for fr, s in zip(residuals, sigma):
         per = {}
-        for name in DIRECTIONS:
-            x = fr.projections[name]
+        for name, x in series_of(fr).items():
             ok = np.isfinite(x)
+            se = s * fr.unit_se[name]
             q, p = ljung_box(x)
             corr = {}
             for cname, c in fr.covariates.items():
                 a, b = x[ok], c[ok]
                 corr[cname] = float(np.corrcoef(a, b)[0, 1]) if a.size > 2 and np.std(b) > 0 and np.std(a) > 0 else 0.0
-            per[name] = {"rms_mm": float(np.sqrt(np.mean(x[ok] ** 2)) * 1e3), "ljung_box_q": q, "ljung_box_p": p,
+            rms = float(np.sqrt(np.mean(x[ok] ** 2))) if ok.any() else float("nan")
+            noise = float(np.sqrt(np.mean(se[ok] ** 2))) if ok.any() else float("nan")
+            unit = "rms_mrad" if name in ROTATIONS else "rms_mm"
+            per[name] = {unit: rms * 1e3, "noise_ratio": rms / noise if noise > 0 else float("nan"),
+                         "ljung_box_q": q, "ljung_box_p": p,
                          "windows_s": structured_windows(x, se, fr.times), "correlation": corr}
         out[fr.name] = per
     return out

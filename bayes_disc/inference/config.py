@@ -18,7 +18,8 @@ sampler:                 # emcee settings
   processes: 2           # ensembles run in parallel processes
 least_squares: {starts: 4, max_nfev: 200}
 simulator: {method: vern7, step_factor: null}   # Runge–Kutta tableau and step factor (kernel defaults)
-physics: {side_force: {CY: 0.0}}        # extra terms in the model; values are starting guesses
+physics: {side_force: {CY: 0.0}}        # extra terms (physics.TERMS) and data explanations
+                                         # (marker_geometry, time_offset); values are starting guesses
 flight_options:                          # per flight, by name
   fffl10: {t_start: 0.0, t_end: 0.8}     # time window [s]
 truth: truth.json                        # optional truth file (synthetic data) for reports
@@ -137,7 +138,7 @@ def load_config(path, output_override=None) -> RunConfig:
     method = sim.string("method", DEFAULT_METHOD, choices=tuple(TABLEAUX))
     step = sim.number("step_factor", None, positive=True)
     sim.finish()
-    physics = read_physics(path, sec)
+    physics = read_physics(path, sec, marker_ids=tuple(markers))
     fo_raw = sec.raw("flight_options", {}) or {}
     if not isinstance(fo_raw, dict):
         raise ConfigError(path, "flight_options", "must map flight names to options")

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..observation.config_io import ConfigError
+from ..observation.explanations import EXPLANATIONS, get_explanations
 from ..observation.markers import load_flights
 from ..physics import SimulatorSettings, get_terms
 from .config import RunConfig
@@ -34,7 +35,8 @@ def load_run_flights(cfg: RunConfig):
 
 
 def build_problem(cfg: RunConfig, terms_override=None, flights=None) -> Problem:
-    """The Problem of a run; ``terms_override`` (ids) replaces the config's ``physics`` terms."""
+    """The Problem of a run; ``terms_override`` (ids of physics terms and data explanations) replaces the
+    config's ``physics`` block."""
     flights = load_run_flights(cfg) if flights is None else flights
     mb = np.array([cfg.markers[i] for i in cfg.marker_ids], float)
     starts = []
@@ -43,10 +45,13 @@ def build_problem(cfg: RunConfig, terms_override=None, flights=None) -> Problem:
             starts.append(initial_state_from_data(f, mb))
         except ValueError as e:
             raise ConfigError(cfg.path, "flights", str(e)) from None
-    term_ids = list(cfg.physics) if terms_override is None else list(terms_override)
-    terms = get_terms(term_ids)
+    ids = list(cfg.physics) if terms_override is None else list(terms_override)
+    terms = get_terms([i for i in ids if i not in EXPLANATIONS])
+    explanations = get_explanations([i for i in ids if i in EXPLANATIONS])
     settings = SimulatorSettings(method=cfg.simulator_method, step_factor=cfg.simulator_step_factor)
     problem = Problem(flights=flights, marker_body=mb, disc=cfg.disc, env=cfg.env, prior_name=cfg.prior,
-                      terms=terms, start_states=starts, settings=settings)
+                      terms=terms, explanations=explanations, start_states=starts, settings=settings)
+    given = {name: v for tid in ids for name, v in cfg.physics.get(tid, {}).items()}
+    problem.term_start = np.array([given.get(p.name, p.off_value) for p in problem.ext_parameters], float)
     problem.rates = [problem.flight_rate(s) for s in starts]
     return problem

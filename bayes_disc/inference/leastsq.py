@@ -76,6 +76,8 @@ def whitened_jacobian(x: np.ndarray, problem: Problem, sigma: np.ndarray) -> np.
 
 def _starts(problem: Problem, n: int, rng: np.random.Generator) -> list[np.ndarray]:
     base = problem.prior_mean.copy()
+    if problem.term_start is not None and problem.n_ext:
+        base[problem.n_coef: problem.ic_start] = problem.term_start
     out = []
     for key in ("potts_crowther", "hummel2002"):
         x = base.copy()
@@ -102,10 +104,17 @@ def fit_least_squares(problem: Problem, starts: int = 4, max_nfev: int = 200, se
         if progress is not None:
             progress(i, res.cost)
     best = min(results, key=lambda r: r.cost)
-    x = best.x
-    nfev = sum(r.nfev for r in results)
-    # re-estimate each flight's σ from its residuals and refit from the best start (twice)
-    for _ in range(2):
+    out = refine_least_squares(problem, best.x, max_nfev=max_nfev)
+    out.start_costs = [float(r.cost) for r in results]
+    out.nfev += int(sum(r.nfev for r in results))
+    return out
+
+
+def refine_least_squares(problem: Problem, x0: np.ndarray, max_nfev: int = 200, rounds: int = 2) -> LeastSquaresResult:
+    """From x0: estimate each flight's σ from its residuals and refit (``rounds`` times), then the
+    Gauss–Newton covariance at the optimum."""
+    x, nfev, res = np.asarray(x0, float), 0, None
+    for _ in range(rounds):
         sigma = _rms(problem, x)
         res = least_squares(whitened_residuals, x, jac=whitened_jacobian, args=(problem, sigma), method="trf",
                             x_scale=problem.prior_sd, max_nfev=max_nfev, xtol=1e-12, ftol=1e-12)
@@ -113,11 +122,10 @@ def fit_least_squares(problem: Problem, starts: int = 4, max_nfev: int = 200, se
     sigma = _rms(problem, x)
     J = whitened_jacobian(x, problem, sigma)
     cov = covariance_from_jacobian(J)
-    return LeastSquaresResult(theta=x, sigma=sigma, cov=cov, cost=float(res.cost),
-                              condition_number=condition_number(J),
-                              start_costs=[float(r.cost) for r in results], nfev=int(nfev),
-                              message=str(res.message), names=problem.names,
-                              flight_names=[f.name for f in problem.flights])
+    cost = float(0.5 * np.sum(whitened_residuals(x, problem, sigma) ** 2))
+    return LeastSquaresResult(theta=x, sigma=sigma, cov=cov, cost=cost, condition_number=condition_number(J),
+                              start_costs=[], nfev=int(nfev), message=str(res.message) if res else "",
+                              names=problem.names, flight_names=[f.name for f in problem.flights])
 
 
 def _scaled_information(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -15,10 +15,11 @@ joint posterior far from Gaussian), and σ_f is then drawn exactly from its cond
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..observation.explanations import DataExplanation, predicted_markers
 from ..observation.markers import FlightObservation
 from ..physics import COEFFICIENT_NAMES, Disc, Environment, SimulatorSettings, Term, simulate
 from ..physics.frames import quat_from_rotvec, quat_multiply
@@ -40,14 +41,19 @@ class Problem:
     env: Environment
     prior_name: str
     terms: tuple[Term, ...] = ()
+    explanations: tuple[DataExplanation, ...] = ()  # data explanations (marker geometry, timing)
     term_start: np.ndarray | None = None          # starting values of the extra-term parameters
     start_states: list[np.ndarray] = field(default_factory=list)  # data-derived (13,) per flight
     settings: SimulatorSettings = SimulatorSettings()
     rates: list[float] = field(default_factory=list)  # fixed integration rate per flight [rad/s]
+    kernel_terms: tuple[Term, ...] = ()  # if set, a superset of ``terms`` to integrate with (absent ones off):
+    #                                     one compiled kernel then serves many models (missing-physics search)
 
     def __post_init__(self):
         self.n_coef = len(COEFFICIENT_NAMES)
-        self.n_ext = sum(len(t.parameters) for t in self.terms)
+        self.marker_ids = tuple(self.flights[0].marker_ids) if self.flights else ()
+        self.n_phys = sum(len(t.parameters) for t in self.terms)
+        self.n_ext = self.n_phys + sum(len(p) for p in self._explanation_parameters())
         self.n_flights = len(self.flights)
         self.ic_start = self.n_coef + self.n_ext
         self.dim = self.ic_start + 12 * self.n_flights
@@ -59,9 +65,22 @@ class Problem:
         self.prior_mean, self.prior_sd = mean, sd
 
     # -- names ------------------------------------------------------------------------------------------
+    def _explanation_parameters(self) -> list[tuple]:
+        return [e.parameters_for(self.marker_ids) for e in self.explanations]
+
+    @property
+    def ext_parameters(self) -> list:
+        """:class:`~bayes_disc.physics.TermParameter` of every extra parameter, in θ order."""
+        return [p for t in self.terms for p in t.parameters] + [p for ps in self._explanation_parameters() for p in ps]
+
     @property
     def ext_names(self) -> list[str]:
-        return [p.name for t in self.terms for p in t.parameters]
+        return [p.name for p in self.ext_parameters]
+
+    @property
+    def model_ids(self) -> list[str]:
+        """SPEC ids of the model's extra physics terms and data explanations."""
+        return [t.id for t in self.terms] + [e.id for e in self.explanations]
 
     @property
     def names(self) -> list[str]:
@@ -88,11 +107,8 @@ class Problem:
         sd = np.zeros(self.dim)
         for i, n in enumerate(COEFFICIENT_NAMES):
             mean[i], sd[i] = cp.mean[n], cp.sd[n]
-        j = self.n_coef
-        for t in self.terms:
-            for p in t.parameters:
-                mean[j], sd[j] = p.off_value, p.prior_sd
-                j += 1
+        for j, p in enumerate(self.ext_parameters, start=self.n_coef):
+            mean[j], sd[j] = p.off_value, p.prior_sd
         ic_sd = np.repeat([IC_SD["position"], IC_SD["velocity"], IC_SD["attitude"], IC_SD["omega"]], 3)
         for k in range(self.n_flights):
             mean[self.ic_slice(k)] = self.state_to_ic(self.start_states[k], k)
@@ -128,19 +144,51 @@ class Problem:
 
     def simulate(self, theta: np.ndarray, k: int, want_states: bool = True):
         """The simulator's :class:`~bayes_disc.physics.simulator.Trajectories` of flight k for θ (B, dim)
-        on the flight's sample times."""
+        on the flight's sample times (markers include the data explanations)."""
         theta = np.atleast_2d(theta)
         f = self.flights[k]
         states = self.ic_to_state(theta[:, self.ic_slice(k)], k)
-        ext = theta[:, self.n_coef: self.ic_start] if self.n_ext else None
+        ext = theta[:, self.n_coef: self.n_coef + self.n_phys] if self.n_phys else None
+        terms = self.terms
+        if self.kernel_terms:
+            terms, ext = self.kernel_terms, self._kernel_extension(theta)
         settings = self.settings
         if self.rates:
             settings = SimulatorSettings(method=settings.method, step_factor=settings.step_factor,
                                          omega_cap=settings.omega_cap, speed_cap=settings.speed_cap,
                                          fixed_rate=self.rates[k])
-        return simulate(states, theta[:, : self.n_coef], f.times, t0=f.times[0], disc=self.disc, env=self.env,
-                        marker_body=self.marker_body, terms=self.terms, extension=ext, settings=settings,
-                        want_states=want_states)
+        tr = simulate(states, theta[:, : self.n_coef], f.times, t0=f.times[0], disc=self.disc, env=self.env,
+                      marker_body=self.marker_body, terms=terms, extension=ext, settings=settings,
+                      want_states=want_states or bool(self.explanations))
+        if self.explanations:
+            tr = replace(tr, markers=self._explained_markers(theta, tr.states))
+            if not want_states:
+                tr = replace(tr, states=None)
+        return tr
+
+    def _kernel_extension(self, theta: np.ndarray) -> np.ndarray:
+        """Parameters (B, n) of ``kernel_terms``: the model's own from θ, the others at their off values."""
+        own = {t.id: self.n_coef + sum(len(u.parameters) for u in self.terms[:i]) for i, t in enumerate(self.terms)}
+        missing = set(own) - {t.id for t in self.kernel_terms}
+        if missing:
+            raise ValueError(f"kernel_terms lacks the model's terms {sorted(missing)}")
+        cols = []
+        for t in self.kernel_terms:
+            for i, par in enumerate(t.parameters):
+                cols.append(theta[:, own[t.id] + i] if t.id in own else np.full(theta.shape[0], par.off_value))
+        return np.column_stack(cols)
+
+    def _explained_markers(self, theta: np.ndarray, states: np.ndarray) -> np.ndarray:
+        """Markers (B, n, m, 3) with the data explanations' body and timing offsets applied."""
+        m = self.marker_body.shape[0]
+        body, timing = None, None
+        j = self.n_coef + self.n_phys
+        for e, params in zip(self.explanations, self._explanation_parameters()):
+            b, t = e.offsets(theta[:, j: j + len(params)], m)
+            body = b if b is not None else body
+            timing = t if t is not None else timing
+            j += len(params)
+        return predicted_markers(states, self.marker_body, body, timing, self.env.g)
 
     def residuals(self, theta: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Observed-point residuals (B, n_coords_k) [m] (predicted − measured) and ok flags."""

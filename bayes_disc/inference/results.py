@@ -49,7 +49,7 @@ def build_summary(problem: Problem, chains: Chains, ls_dict: dict, cfg_info: dic
         "coefficients": coef,
         "literature": literature_table(),
         "prior": {"name": problem.prior_name, "description": coefficient_prior(problem.prior_name).description},
-        "physics_terms": [t.id for t in problem.terms],
+        "physics_terms": problem.model_ids,
         "convergence": {
             "converged": chains.converged, "reason": chains.reason, "ensembles": int(chains.chain.shape[0]),
             "walkers_per_ensemble": int(chains.chain.shape[2]), "total_steps": int(chains.total_steps),

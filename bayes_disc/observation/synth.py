@@ -4,7 +4,9 @@ Each flight is described by its launch: speed [m/s], launch angle above horizont
 [deg], release position [m], the disc attitude as nose-up pitch [deg] (or the angle of attack at
 release, ``alpha_deg``) and roll [deg], spin r [rad/s] (> 0 clockwise from above: right-handed
 backhand) and optional wobble rates p, q [rad/s]; flight time [s], per-flight marker noise [mm] and a
-dropout fraction. Extra physics terms (``physics:``) make data with effects the base model lacks.
+dropout fraction. Extra physics terms (``physics:``) make data with effects the base model lacks; a
+per-flight ``gust`` (a wind that blows only during a time window of one flight) makes a disturbance
+that no term of the library describes.
 Output: a SPEC §4 marker file and a truth JSON (coefficients, terms, initial states, noise).
 """
 from __future__ import annotations
@@ -15,11 +17,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..physics import (COEFFICIENT_NAMES, LITERATURE, Coefficients, Disc, Environment, get_terms,
+from ..physics import (COEFFICIENT_NAMES, LITERATURE, TERMS, Coefficients, Disc, Environment, Trajectories, get_terms,
                        literature_coefficients, simulate)
 from ..physics.frames import (angle_of_attack, attitude_from_yaw_pitch_roll, omega_body_from_pqr,
                               quat_to_matrix)
 from .config_io import ConfigError, Section, load_yaml
+from .explanations import EXPLANATIONS
 from .markers import FlightObservation, table_from_flights, write_marker_csv
 
 DEFAULT_MARKERS = {"0": [0.100, 0.000, -0.015], "1": [-0.0308, 0.0846, -0.015], "2": [-0.0707, -0.0778, -0.015]}
@@ -43,6 +46,7 @@ class LaunchSpec:
     duration: float = 1.0
     noise_mm: float = 2.0
     dropout: float = 0.0
+    gust: tuple | None = None     # (t_start, t_end, w_x, w_y, w_z): extra wind [m/s] during [t_start, t_end) s
 
     def initial_state(self, wind=None) -> np.ndarray:
         """State (13,) at release: position, velocity, quaternion, body ω."""
@@ -90,6 +94,43 @@ class SynthSpec:
         return None if w is None else np.array([w.get(k, 0.0) for k in ("wind_x", "wind_y", "wind_z")])
 
 
+def _simulate_flight(spec: SynthSpec, f: LaunchSpec, y0: np.ndarray, times: np.ndarray, mb: np.ndarray, terms,
+                     ext: np.ndarray):
+    """One flight's trajectory; with a gust, three segments (before, during with the gust's wind added,
+    after), each started from the previous one's final state."""
+    def run(y, ts, t0, gust=None):
+        tt, ee = terms, ext
+        if gust is not None:
+            wind_ids = [t.id for t in terms]
+            if "wind" in wind_ids:
+                j = sum(len(t.parameters) for t in terms[: wind_ids.index("wind")])
+                ee = ext.copy()
+                ee[j: j + 3] += gust
+            else:
+                tt, ee = terms + get_terms(["wind"]), np.r_[ext, gust]
+        tr = simulate(y, spec.coefficients.as_array(), ts, t0=t0, disc=spec.disc, env=spec.env, marker_body=mb,
+                      terms=tt, extension=ee if ee.size else None)
+        if not tr.ok[0]:
+            raise ValueError(f"synthetic flight {f.name!r}: simulation failed ({tr.failure_reasons()[0]})")
+        return tr
+    if f.gust is None:
+        return run(y0, times, times[0])
+    g0, g1 = float(f.gust[0]), float(f.gust[1])
+    w = np.asarray(f.gust[2:5], float)
+    cuts = [times[0], g0, g1, np.inf]
+    states, markers, y, t_start = [], [], y0, times[0]
+    for i in range(3):
+        sel = (times >= cuts[i]) & (times < cuts[i + 1])
+        end = min(cuts[i + 1], times[-1])
+        ts = np.r_[times[sel], end]
+        tr = run(y, ts, t_start, w if i == 1 else None)
+        states.append(tr.states[0, :-1])
+        markers.append(tr.markers[0, :-1])
+        y, t_start = tr.states[0, -1], end
+    return Trajectories(times=times, states=np.concatenate(states)[None], markers=np.concatenate(markers)[None],
+                        status=np.zeros(1, int))
+
+
 @dataclass
 class SynthResult:
     flights: list[FlightObservation]
@@ -106,10 +147,7 @@ def synthesize(spec: SynthSpec) -> SynthResult:
     for f in spec.flights:
         times = np.arange(int(round(f.duration * spec.sample_rate_hz)) + 1) / spec.sample_rate_hz
         y0 = f.initial_state(spec.wind())
-        tr = simulate(y0, spec.coefficients.as_array(), times, disc=spec.disc, env=spec.env, marker_body=mb,
-                      terms=terms, extension=ext if ext.size else None)
-        if not tr.ok[0]:
-            raise ValueError(f"synthetic flight {f.name!r}: simulation failed ({tr.failure_reasons()[0]})")
+        tr = _simulate_flight(spec, f, y0, times, mb, terms, ext)
         states = tr.states[0]
         sigma = f.noise_mm / 1000.0
         pos = tr.markers[0] + rng.normal(0.0, sigma, tr.markers[0].shape)
@@ -188,20 +226,40 @@ def read_markers(path, sec: Section, default=None) -> dict:
     return out
 
 
-def read_physics(path, sec: Section) -> dict:
+def read_physics(path, sec: Section, marker_ids=None) -> dict:
+    """The ``physics:`` block: term id → {parameter: starting value}. With ``marker_ids`` (run
+    configurations) the data explanations ``marker_geometry`` and ``time_offset`` are allowed too."""
     raw = sec.raw("physics", {}) or {}
     if not isinstance(raw, dict):
         raise ConfigError(path, "physics", "must map term ids to their parameters")
     out = {}
     for tid, params in raw.items():
-        try:
-            (term,) = get_terms([tid])
-        except KeyError as e:
-            raise ConfigError(path, f"physics.{tid}", str(e.args[0])) from None
+        if marker_ids is not None and tid in EXPLANATIONS:
+            parameters = EXPLANATIONS[tid].parameters_for(tuple(marker_ids))
+        else:
+            try:
+                (term,) = get_terms([tid])
+            except KeyError as e:
+                known = sorted(TERMS) + (sorted(EXPLANATIONS) if marker_ids is not None else [])
+                raise ConfigError(path, f"physics.{tid}", f"unknown term {tid!r}; known: {known}") from None
+            parameters = term.parameters
         s = Section(path, params, f"physics.{tid}")
-        out[tid] = {p.name: s.number(p.name, p.off_value) for p in term.parameters}
+        out[tid] = {p.name: s.number(p.name, p.off_value) for p in parameters}
         s.finish()
     return out
+
+
+def _gust(path, f: Section) -> tuple | None:
+    g = f.section("gust")
+    if not g.data:
+        return None
+    t0 = g.number("t_start", required=True, nonnegative=True)
+    t1 = g.number("t_end", required=True, positive=True)
+    w = g.vector("wind", 3, required=True)
+    g.finish()
+    if t1 <= t0:
+        raise ConfigError(path, g.key("t_end"), "must be after t_start")
+    return (t0, t1, *w)
 
 
 def load_synth_spec(path) -> tuple[SynthSpec, Path, Path]:
@@ -241,6 +299,7 @@ def load_synth_spec(path) -> tuple[SynthSpec, Path, Path]:
             duration=f.number("duration", 1.0, positive=True),
             noise_mm=f.number("noise_mm", 2.0, nonnegative=True),
             dropout=f.number("dropout", 0.0, minimum=0.0, maximum=0.9),
+            gust=_gust(path, f),
         ))
         f.finish()
     names = [f.name for f in flights]

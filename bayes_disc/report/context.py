@@ -290,19 +290,8 @@ class ReportContext:
 
     # -- simulations ------------------------------------------------------------------------------------
     def simulate(self, theta: np.ndarray, k: int):
-        """States and markers of flight k for θ (B, dim): the same integrator settings as the model's."""
-        from ..physics import SimulatorSettings, simulate
-        p = self.problem
-        theta = np.atleast_2d(theta)
-        f = p.flights[k]
-        states = p.ic_to_state(theta[:, p.ic_slice(k)], k)
-        ext = theta[:, p.n_coef: p.ic_start] if p.n_ext else None
-        s = p.settings
-        if p.rates:
-            s = SimulatorSettings(method=s.method, step_factor=s.step_factor, omega_cap=s.omega_cap,
-                                  speed_cap=s.speed_cap, fixed_rate=p.rates[k], rate_margin=s.rate_margin)
-        return simulate(states, theta[:, : p.n_coef], f.times, t0=f.times[0], disc=p.disc, env=p.env,
-                        marker_body=p.marker_body, terms=p.terms, extension=ext, settings=s, want_states=True)
+        """States and markers of flight k for θ (B, dim), exactly as the model predicts them."""
+        return self.problem.simulate(theta, k, want_states=True)
 
     @cached_property
     def flight_sims(self) -> list[FlightSim]:

@@ -1,0 +1,253 @@
+"""``bayes-disc diagnose``: base fit, candidate ranking, refit with the accepted terms, diagnosis.json.
+
+Writes into the run's output folder:
+
+* ``diagnosis.json`` (SPEC §6): verdict, accepted effects ranked best first ({id, evidence (ΔBIC),
+  estimate, where}), RMS per flight before/after [mm]; plus every candidate's evidence, whiteness
+  before/after, the shifted base coefficients, unexplained structure and the diagnosis in words;
+* ``diagnosis_residuals.npz``: the residual series before and after (report figures);
+* ``diagnosis_refit/``: the resampled run with the accepted terms (unless ``sample=False``).
+"""
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from ..inference.config import RunConfig
+from ..inference.data import build_problem, load_run_flights
+from ..inference.leastsq import fit_least_squares
+from ..observation.explanations import EXPLANATIONS
+from ..physics import COEFFICIENT_NAMES, TERMS
+from .missing_physics import (CANDIDATES, EVIDENCE_THRESHOLD, Diagnosis, ModelFit, describe_where, diagnose,
+                              fingerprint, model_fit)
+from .missing_physics import SERIES_WORDS, onset_of_mismatch
+from .residuals import peak_window, series_of
+
+#: a base coefficient "moved" when the refit shifts it by more than this many base standard deviations
+SHIFT_SD = 2.0
+
+
+def unit_parameter_names(unit_id: str, marker_ids) -> tuple[str, ...]:
+    """Extra parameter names of a physics term or data explanation."""
+    if unit_id in TERMS:
+        return TERMS[unit_id].parameter_names
+    return tuple(p.name for p in EXPLANATIONS[unit_id].parameters_for(tuple(marker_ids)))
+
+
+def _title(term_id: str) -> str:
+    unit = TERMS.get(term_id) or EXPLANATIONS.get(term_id)
+    return unit.title if unit is not None else term_id
+
+
+def _whiteness(fit: ModelFit) -> dict:
+    """{flight: {series: Ljung–Box p}}."""
+    return {f: {s: d["ljung_box_p"] for s, d in per.items()} for f, per in fit.localisation.items()}
+
+
+def _ls_estimates(fit: ModelFit, names) -> dict:
+    sd = np.sqrt(np.diag(fit.ls.cov))
+    idx = {n: i for i, n in enumerate(fit.problem.names)}
+    out = {}
+    for n in names:
+        v, s = float(fit.ls.theta[idx[n]]), float(sd[idx[n]])
+        out[n] = {"value": v, "sd": s, "q025": v - 1.96 * s, "q975": v + 1.96 * s, "source": "least squares (Laplace)"}
+    return out
+
+
+def _posterior_estimates(run_dir: Path, names) -> dict:
+    import arviz as az
+    post = az.from_netcdf(str(run_dir / "posterior.nc")).posterior
+    out = {}
+    for n in names:
+        x = np.asarray(post[n]).reshape(-1)
+        out[n] = {"value": float(np.mean(x)), "sd": float(np.std(x)), "q025": float(np.quantile(x, 0.025)),
+                  "q975": float(np.quantile(x, 0.975)), "source": "posterior (emcee)"}
+    return out
+
+
+def coefficient_shifts(before: dict, after: dict) -> list[dict]:
+    """Base coefficients whose estimate moved by more than SHIFT_SD of the base model's sd."""
+    out = []
+    for n in COEFFICIENT_NAMES:
+        b, a = before[n], after[n]
+        z = (a["value"] - b["value"]) / b["sd"] if b["sd"] > 0 else 0.0
+        if abs(z) > SHIFT_SD:
+            out.append({"name": n, "before": b["value"], "before_sd": b["sd"], "after": a["value"],
+                        "after_sd": a["sd"], "shift_sd": float(z)})
+    return sorted(out, key=lambda s: -abs(s["shift_sd"]))
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.3g}"
+
+
+def words(result: dict) -> str:
+    """The diagnosis in words (printed by the command, shown in the report)."""
+    lines = []
+    before, after = result["rms_before_mm"], result["rms_after_mm"]
+    if result["verdict"] == "adequate":
+        best = result["candidates"][0] if result["candidates"] else None
+        lines.append("The model is adequate: the residuals of every flight are white"
+                     + (f" and no candidate earns its place (best: {best['id']}, ΔBIC {best['evidence']:.1f} "
+                        f"≤ {EVIDENCE_THRESHOLD:.0f})." if best else "."))
+        lines.append("RMS " + ", ".join(f"{f} {v:.2f} mm" for f, v in before.items()) + ".")
+        return "\n".join(lines)
+    for e in result["effects"]:
+        est = "; ".join(f"{n} = {_fmt(v['value'])} (95% {_fmt(v['q025'])} … {_fmt(v['q975'])})"
+                        for n, v in e["estimate"].items())
+        lines.append(f"{e['where'][0].upper()}{e['where'][1:]} → {e['title']} [{e['id']}]. "
+                     f"ΔBIC {e['evidence']:.1f}. Estimated {est}.")
+    if result["effects"]:
+        lines.append("RMS " + ", ".join(f"{f} {before[f]:.2f} → {after[f]:.2f} mm" for f in before) + ".")
+        moved = result.get("shifted_coefficients") or []
+        if moved:
+            lines.append("Base coefficients the missing term had biased: " + ", ".join(
+                f"{s['name']} moved from {_fmt(s['before'])} to {_fmt(s['after'])} ({s['shift_sd']:+.1f} sd)"
+                for s in moved) + ".")
+        else:
+            lines.append("No base coefficient moved by more than 2 sd.")
+    for u in result["unexplained"]:
+        a, b = u["peak_window_s"]
+        onset = u["model_follows_until_s"]
+        lines.append(f"Unexplained: flight {u['flight']} (RMS {u['rms_mm']:.2f} mm) — structured "
+                     f"{', '.join(SERIES_WORDS[s] for s in u['series'][:4])} residuals, largest at {a:.2f}–{b:.2f} s"
+                     + (f"; the model follows the flight until {onset:.2f} s after its start, then departs"
+                        if onset is not None else "; structured from the start")
+                     + ". No term of the library removes it (a gust, a collision or a tracking fault?).")
+    rejected = [c for c in result["candidates"] if c["status"] == "insufficient" and c["round"] == 1]
+    if result["unexplained"] and rejected:
+        lines.append("Not forced onto a term: " + ", ".join(
+            f"{c['id']} (ΔBIC {c['evidence']:.1f} but leaves structure)" for c in rejected[:4]) + ".")
+    return "\n".join(lines)
+
+
+def _unexplained(diag: Diagnosis) -> list[dict]:
+    """Flights whose residuals stay structured after the accepted terms: the series (most structured
+    first), the window where the structure is strongest, and the Ljung–Box p-values."""
+    out = []
+    names = [f.name for f in diag.final.problem.flights]
+    for flight, series in diag.unexplained.items():
+        if not series:
+            continue
+        k = names.index(flight)
+        loc = diag.final.localisation[flight]
+        series = sorted(series, key=lambda s: loc[s]["ljung_box_p"])
+        out.append({"flight": flight, "series": series, "model_follows_until_s": onset_of_mismatch(diag.final, k),
+                    "peak_window_s": peak_window(diag.final.residuals[k], diag.final.ls.sigma[k]),
+                    "rms_mm": diag.final.rms_mm[flight],
+                    "ljung_box_p": {s: loc[s]["ljung_box_p"] for s in series}})
+    return out
+
+
+def save_series(path: Path, diag: Diagnosis) -> None:
+    """Residual series before/after per flight for the report's figures."""
+    arrays = {}
+    for k, (b, a) in enumerate(zip(diag.base.residuals, diag.final.residuals)):
+        arrays[f"{k}_times"] = b.times
+        for name, x in series_of(b).items():
+            arrays[f"{k}_before_{name}"] = x
+            arrays[f"{k}_after_{name}"] = series_of(a)[name]
+            arrays[f"{k}_se_{name}"] = a.unit_se[name] * diag.final.ls.sigma[k]
+    arrays["flights"] = np.array([f.name for f in diag.base.problem.flights])
+    np.savez_compressed(path, **arrays)
+
+
+def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, log=print, report: bool = True,
+                 reports_dir="reports", progress: bool = True) -> dict:
+    """The ``diagnose`` command (module docstring); returns the diagnosis.json content."""
+    t0 = time.perf_counter()
+    out = Path(cfg.output)
+    out.mkdir(parents=True, exist_ok=True)
+    flights = load_run_flights(cfg)
+    base_ids = tuple(cfg.physics)
+
+    def build(ids):
+        return build_problem(cfg, terms_override=list(ids), flights=flights)
+
+    problem = build(base_ids)
+    log(f"{cfg.name}: {problem.n_flights} flights; base model"
+        + (f" with {', '.join(base_ids)}" if base_ids else "") + "; fitting by least squares")
+    ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
+                           seed=cfg.sampler.seed)
+    base = model_fit(problem, ls, base_ids)
+    log("base RMS " + ", ".join(f"{f} {v:.2f} mm" for f, v in base.rms_mm.items()))
+    candidates = [c for c in CANDIDATES if c not in base_ids]
+    log(f"ranking {len(candidates)} candidates by ΔBIC (each a least-squares refit):")
+    diag = diagnose(base, build, processes=processes, max_nfev=cfg.least_squares.max_nfev,
+                    candidates=candidates, log=log)
+    final = diag.final
+    result = {"verdict": diag.verdict, "effects": [], "rms_before_mm": base.rms_mm, "rms_after_mm": final.rms_mm}
+    before_est = _ls_estimates(base, COEFFICIENT_NAMES)
+    after_est = _ls_estimates(final, COEFFICIENT_NAMES + tuple(final.problem.ext_names))
+    refit_dir = out / "diagnosis_refit"
+    if diag.accepted and sample:
+        from ..inference.run import run_sample
+        physics = dict(cfg.physics)
+        theta = dict(zip(final.problem.names, final.ls.theta))
+        for c in diag.accepted:
+            physics[c.id] = {n: float(theta[n]) for n in unit_parameter_names(c.id, problem.marker_ids)}
+        refit_cfg = replace(cfg, name=f"{cfg.name}_refit", output=refit_dir, physics=physics)
+        log(f"resampling with {', '.join(c.id for c in diag.accepted)} → {refit_dir}")
+        run_sample(refit_cfg, progress=progress, log=log, report=False)
+        after_est = _posterior_estimates(refit_dir, COEFFICIENT_NAMES + tuple(final.problem.ext_names))
+    base_names = set(base.problem.ext_names)
+    for rank, c in enumerate(diag.accepted):
+        new = [n for n in c.fit.problem.ext_names if n not in base_names]
+        base_names |= set(new)
+        fp = fingerprint(base if rank == 0 else diag.accepted[rank - 1].fit, c.fit, new)
+        result["effects"].append({"id": c.id, "evidence": c.delta_bic, "estimate": {n: after_est[n] for n in new},
+                                  "where": describe_where(fp, problem.n_flights), "title": _title(c.id),
+                                  "status": c.status, "fingerprint": fp})
+    result["effects"].sort(key=lambda e: -e["evidence"])
+    result["unexplained"] = _unexplained(diag)
+    result["shifted_coefficients"] = coefficient_shifts(before_est, after_est) if diag.accepted else []
+    result["candidates"] = [{"id": c.id, "evidence": c.delta_bic, "status": c.status,
+                             "evidence_from_white_flights": c.clean_evidence, "per_flight_gain": c.per_flight_gain,
+                             "extra_parameters": c.extra_parameters,
+                             "round": r + 1, "rms_mm": c.fit.rms_mm, "structured_after": c.structured_after}
+                            for r, ranked in enumerate(diag.rounds) for c in ranked]
+    result["whiteness_before"] = _whiteness(base)
+    result["whiteness_after"] = _whiteness(final)
+    result["localisation_before"] = base.localisation
+    result["noise_sigma_mm"] = {"before": dict(zip(base.ls.flight_names, (base.ls.sigma * 1e3).tolist())),
+                                "after": dict(zip(final.ls.flight_names, (final.ls.sigma * 1e3).tolist()))}
+    result["coefficients_before"] = before_est
+    result["coefficients_after"] = after_est
+    result["model"] = {"base": list(base_ids), "final": list(final.ids)}
+    result["settings"] = {"evidence_threshold_delta_bic": EVIDENCE_THRESHOLD, "resampled": bool(diag.accepted and sample),
+                          "refit_run": str(refit_dir) if diag.accepted and sample else None}
+    result["words"] = words(result)
+    result["wall_time_s"] = time.perf_counter() - t0
+    (out / "diagnosis.json").write_text(json.dumps(_finite(result), indent=1, allow_nan=False))
+    save_series(out / "diagnosis_residuals.npz", diag)
+    log(result["words"])
+    log(f"wrote {out / 'diagnosis.json'} ({result['wall_time_s']:.0f} s)")
+    if report:
+        if (out / "summary.json").is_file() and (out / "posterior.nc").is_file():
+            from ..report import build_report
+            log(f"wrote {build_report(out, reports_dir=Path(reports_dir), seed=cfg.sampler.seed, log=None)}")
+        else:
+            log(f"no sampled run in {out}: run `bayes-disc sample {cfg.path}` for the HTML report "
+                "(it then includes this diagnosis)")
+    return result
+
+
+def _finite(x):
+    """JSON-safe copy: numpy scalars and arrays to Python, NaN and ±inf to null."""
+    if isinstance(x, dict):
+        return {str(k): _finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _finite(x.tolist())
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return float(x) if np.isfinite(x) else None
+    if isinstance(x, np.bool_):
+        return bool(x)
+    return x

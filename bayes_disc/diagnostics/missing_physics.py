@@ -1,0 +1,396 @@
+"""Missing physics: locate a mismatch, name the term of the library that explains it, show the gain.
+
+Every candidate — the physics terms of :data:`bayes_disc.physics.TERMS` and the data explanations of
+:data:`bayes_disc.observation.explanations.EXPLANATIONS` not already in the model — is added to the model
+and the joint least-squares fit is refined from the base optimum. With the noise scale σ_f of every
+flight profiled out, the Gaussian log-likelihood is −½ Σ_f n_f ln S_f + const (S_f: the flight's summed
+squared marker residuals, n_f its coordinates), so the Bayesian information criterion in favour of
+the candidate is
+
+    ΔBIC = Σ_f n_f ln(S_f,base / S_f,cand) − k ln N,
+
+k its extra parameters, N = Σ_f n_f. An extension must earn its place: ΔBIC > 10 ("very strong",
+Kass & Raftery 1995; a Bayes factor above e⁵) — for one parameter that is χ²₁ > 10 + ln N ≈ 19, a
+chance of 1e−5 when nothing is missing.
+
+Evidence alone would force any mismatch onto some term: a gust in one flight "improves" with a wind,
+a ground effect or a roll term, each absorbing a little of it. A candidate is therefore accepted only
+if it also explains the mismatch: after it, the residual series of every flight (six directions and
+three attitude angles, :mod:`.residuals`) are white by Ljung–Box at a Bonferroni-corrected level.
+When no single candidate does, the strongest is combined with each of the others (at most two terms);
+structure that no candidate removes is reported as unexplained, with its flight, series and the time
+window where it is strongest.
+"""
+from __future__ import annotations
+
+import multiprocessing as mp
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from scipy.optimize import least_squares
+
+from ..inference.leastsq import LeastSquaresResult, refine_least_squares, whitened_jacobian, whitened_residuals
+from ..inference.model import Problem
+from ..observation.explanations import EXPLANATIONS
+from ..physics import TERMS, literature_coefficients
+from .residuals import ROTATIONS, flight_residuals, localise, marker_series
+
+#: every candidate, physics terms first
+CANDIDATES = tuple(TERMS) + tuple(EXPLANATIONS)
+#: ΔBIC an extension must exceed
+EVIDENCE_THRESHOLD = 10.0
+#: family-wise chance of calling a correctly specified data set structured (Bonferroni over its series)
+STRUCTURE_ALPHA = 1e-3
+#: most terms combined
+MAX_TERMS = 2
+#: candidates tried together with the strongest one when it alone leaves structure
+PAIR_PARTNERS = 3
+
+
+@dataclass
+class ModelFit:
+    """A least-squares fit of one model: its extra term ids, problem, result, S_f [m²] and residuals."""
+
+    ids: tuple
+    problem: Problem
+    ls: LeastSquaresResult
+    ss: np.ndarray
+    residuals: list = field(default_factory=list)
+    localisation: dict = field(default_factory=dict)
+
+    @property
+    def rms_mm(self) -> dict:
+        return {f.name: float(np.sqrt(s / n) * 1e3) for f, s, n in zip(self.problem.flights, self.ss,
+                                                                        self.problem.n_coords)}
+
+
+def model_fit(problem: Problem, ls: LeastSquaresResult, ids) -> ModelFit:
+    """Residuals and localisation of a fitted model."""
+    ss = problem.sum_squares(ls.theta[None])[0]
+    res = flight_residuals(problem, ls.theta)
+    return ModelFit(tuple(ids), problem, ls, ss, res, localise(problem, ls.theta, ls.sigma, res))
+
+
+def structure_level(n_series: int, alpha: float = STRUCTURE_ALPHA) -> float:
+    """Ljung–Box p-value below which one of ``n_series`` series counts as structured."""
+    return alpha / max(n_series, 1)
+
+
+def structured(fit: ModelFit, alpha: float = STRUCTURE_ALPHA) -> dict:
+    """{flight: [series whose residuals are not white]} (empty lists for white flights)."""
+    n_series = sum(len(per) for per in fit.localisation.values())
+    level = structure_level(n_series, alpha)
+    return {name: [s for s, d in per.items() if np.isfinite(d["ljung_box_p"]) and d["ljung_box_p"] < level]
+            for name, per in fit.localisation.items()}
+
+
+def extend_theta(theta: np.ndarray, source: Problem, target: Problem) -> np.ndarray:
+    """θ of ``source`` mapped into ``target`` (same flights, more extra parameters): shared entries copied,
+    new extra parameters at their starting values (the value that switches them off)."""
+    out = target.prior_mean.copy()
+    if target.term_start is not None and target.n_ext:
+        out[target.n_coef: target.ic_start] = target.term_start
+    out[: source.n_coef] = theta[: source.n_coef]
+    src = dict(zip(source.ext_names, theta[source.n_coef: source.ic_start]))
+    for j, name in enumerate(target.ext_names, start=target.n_coef):
+        if name in src:
+            out[j] = src[name]
+    out[target.ic_start:] = theta[source.ic_start:]
+    return out
+
+
+def evidence(base: ModelFit, cand: ModelFit, flights: np.ndarray | None = None) -> float:
+    """ΔBIC of ``cand`` over ``base`` (module docstring), over all flights or the boolean mask ``flights``."""
+    n = base.problem.n_coords.astype(float)
+    gain = n * np.log(base.ss / cand.ss)
+    mask = np.ones(n.size, bool) if flights is None else flights
+    k = cand.problem.n_ext - base.problem.n_ext
+    return float(np.sum(gain[mask]) - k * np.log(np.sum(n[mask])))
+
+
+@dataclass
+class Candidate:
+    """One candidate judged against the model it extends."""
+
+    id: str
+    fit: ModelFit
+    delta_bic: float
+    per_flight_gain: dict
+    structured_after: dict
+    status: str = ""          # explains | insufficient (leaves structure) | no_evidence
+    clean_evidence: float = float("nan")
+    extra_parameters: int = 0
+
+
+def judge(base: ModelFit, cand_id: str, fit: ModelFit, threshold: float = EVIDENCE_THRESHOLD) -> Candidate:
+    n = base.problem.n_coords.astype(float)
+    gain = n * np.log(base.ss / fit.ss)
+    c = Candidate(cand_id, fit, evidence(base, fit), {f.name: float(g) for f, g in zip(base.problem.flights, gain)},
+                  structured(fit), extra_parameters=fit.problem.n_ext - base.problem.n_ext)
+    clean = np.array([not c.structured_after[f.name] for f in base.problem.flights])
+    if c.delta_bic <= threshold:
+        c.status = "no_evidence"
+    else:
+        c.status = "explains" if clean.all() else "insufficient"
+        if clean.any():
+            c.clean_evidence = evidence(base, fit, clean)
+    return c
+
+
+def candidate_starts(base: ModelFit, problem: Problem) -> list[np.ndarray]:
+    """Starts of a candidate's fit: the base optimum extended, and the data-derived initial conditions with
+    the base coefficients and with the wind-tunnel (Potts & Crowther) ones. The base optimum alone is not
+    enough: its initial conditions have absorbed part of the missing effect (a tilted, wobbling launch
+    mimicking a side force, say), a valley from which the extension's parameter does not escape."""
+    extended = extend_theta(base.ls.theta, base.problem, problem)
+    fresh = problem.prior_mean.copy()
+    if problem.term_start is not None and problem.n_ext:
+        fresh[problem.n_coef: problem.ic_start] = problem.term_start
+    fresh[: problem.n_coef] = base.ls.theta[: problem.n_coef]
+    literature = fresh.copy()
+    literature[: problem.n_coef] = literature_coefficients("potts_crowther").as_array()
+    return [extended, fresh, literature]
+
+
+#: evaluations each start gets before the best one is refined to convergence
+SCOUT_NFEV = 40
+
+
+def _fit_task(task):
+    problem, starts, sigma, max_nfev = task
+    best = None
+    for x0 in starts:
+        res = least_squares(whitened_residuals, x0, jac=whitened_jacobian, args=(problem, sigma), method="trf",
+                            x_scale=problem.prior_sd, max_nfev=min(SCOUT_NFEV, max_nfev), xtol=1e-10, ftol=1e-10)
+        if best is None or res.cost < best.cost:
+            best = res
+    return refine_least_squares(problem, best.x, max_nfev=max_nfev)
+
+
+def fit_candidates(base: ModelFit, build, ids, processes: int = 1, max_nfev: int = 200) -> dict:
+    """Least-squares fits of ``base`` extended by each candidate id in ``ids`` (best of
+    :func:`candidate_starts`); ``build(ids)`` makes the :class:`Problem` of a model. Returns {id: ModelFit}."""
+    problems = {c: build(base.ids + (c,)) for c in ids}
+    for p in problems.values():
+        p.kernel_terms = tuple(TERMS.values())      # one compiled kernel for every candidate
+    tasks = [(p, candidate_starts(base, p), base.ls.sigma, max_nfev) for p in problems.values()]
+    if processes > 1 and len(tasks) > 1:
+        with mp.get_context("fork").Pool(min(processes, len(tasks))) as pool:
+            results = pool.map(_fit_task, tasks, chunksize=1)
+    else:
+        results = [_fit_task(t) for t in tasks]
+    return {c: model_fit(p, ls, base.ids + (c,)) for (c, p), ls in zip(problems.items(), results)}
+
+
+@dataclass
+class Diagnosis:
+    """The outcome: base and final fits, every candidate judged (per round), the accepted ids and the
+    structure left unexplained."""
+
+    base: ModelFit
+    final: ModelFit
+    rounds: list            # [[Candidate ranked best first], ...]
+    accepted: list          # [Candidate]
+    unexplained: dict       # {flight: [series]}
+
+    @property
+    def verdict(self) -> str:
+        return "missing_physics" if self.accepted or any(self.unexplained.values()) else "adequate"
+
+
+def diagnose(base: ModelFit, build, processes: int = 1, max_nfev: int = 200, candidates=CANDIDATES,
+             threshold: float = EVIDENCE_THRESHOLD, log=lambda msg: None) -> Diagnosis:
+    """Rank the candidates (module docstring), accept those that earn their place and explain the data."""
+    current, accepted, rounds = base, [], []
+    pending = None
+    ids = [c for c in candidates if c not in base.ids]
+    for _ in range(MAX_TERMS):
+        if not ids:
+            break
+        fits = fit_candidates(current, build, ids, processes=processes, max_nfev=max_nfev)
+        ranked = sorted((judge(current, c, f, threshold) for c, f in fits.items()),
+                        key=lambda c: c.delta_bic, reverse=True)
+        rounds.append(ranked)
+        log("  " + ", ".join(f"{c.id} ΔBIC {c.delta_bic:.1f} ({c.status})" for c in ranked))
+        good = [c for c in ranked if c.status == "explains"]
+        if good:
+            accepted += ([pending] if pending is not None else []) + [good[0]]
+            break
+        if pending is not None or ranked[0].status != "insufficient":
+            break
+        # the strongest candidate leaves structure: try it together with each of the next strongest
+        pending = ranked[0]
+        current = ranked[0].fit
+        ids = [c.id for c in ranked[1: 1 + PAIR_PARTNERS] if c.status != "no_evidence"]
+    final = accepted[-1].fit if accepted else base
+    left = structured(final)
+    return Diagnosis(base=base, final=final, rounds=rounds, accepted=accepted, unexplained=left)
+
+
+# -- onset of an unexplained mismatch -------------------------------------------------------------------
+
+#: shortest prefix [s] the onset search considers
+ONSET_MIN_S = 0.15
+
+
+def _prefix_is_white(fit: ModelFit, k: int, t_end: float, alpha: float) -> bool:
+    """Whether flight k's first part [t_0, t_end], refitted over its 12 initial conditions with the
+    coefficients and extra parameters of ``fit`` held, leaves white residuals (all nine series)."""
+    p = fit.problem
+    f = p.flights[k].window(None, t_end)
+    sub = replace(p, flights=[f], start_states=[p.start_states[k]], rates=[p.rates[k]] if p.rates else [])
+    fixed = fit.ls.theta[: p.ic_start]
+    sigma = fit.ls.sigma[k: k + 1]
+
+    def resid(x):
+        return whitened_residuals(np.r_[fixed, x], sub, sigma)[: int(sub.n_coords[0])]
+
+    x0 = fit.ls.theta[p.ic_slice(k)]
+    res = least_squares(resid, x0, x_scale=sub.prior_sd[sub.ic_start:], max_nfev=50, xtol=1e-10, ftol=1e-10)
+    theta = np.r_[fixed, res.x]
+    rms = float(np.sqrt(np.mean((resid(res.x) * sigma[0]) ** 2)))
+    loc = localise(sub, theta, np.array([rms]))[f.name]
+    level = structure_level(len(loc), alpha)
+    return all(not np.isfinite(d["ljung_box_p"]) or d["ljung_box_p"] >= level for d in loc.values())
+
+
+def onset_of_mismatch(fit: ModelFit, k: int, alpha: float = STRUCTURE_ALPHA) -> float | None:
+    """Time [s from the flight's start] up to which the model still follows flight k (its first part
+    refits to white residuals), by bisection over the sample times; None if even the first
+    ONSET_MIN_S seconds are structured."""
+    t = fit.problem.flights[k].times
+    lo = int(np.searchsorted(t, t[0] + ONSET_MIN_S))
+    hi = t.size - 1
+    if lo >= hi or not _prefix_is_white(fit, k, t[lo], alpha):
+        return None
+    while hi - lo > 2:
+        mid = (lo + hi) // 2
+        if _prefix_is_white(fit, k, t[mid], alpha):
+            lo = mid
+        else:
+            hi = mid
+    return float(t[lo] - t[0])
+
+
+# -- description ----------------------------------------------------------------------------------------
+
+def term_signature(fit: ModelFit, names) -> list[dict]:
+    """What the extra parameters ``names`` do in ``fit``: per flight, the noise-free change of the
+    predicted markers when they are switched off (same initial conditions and coefficients), as the
+    series of :func:`.residuals.marker_series` [m, rad], plus the change's acceleration along each
+    direction [m/s²] and the flight's covariates."""
+    p = fit.problem
+    off = fit.ls.theta.copy()
+    for j, par in enumerate(p.ext_parameters, start=p.n_coef):
+        if par.name in names:
+            off[j] = par.off_value
+    out = []
+    for k, f in enumerate(p.flights):
+        on_tr, off_tr = p.simulate(fit.ls.theta[None], k), p.simulate(off[None], k)
+        st, pred = on_tr.states[0], on_tr.markers[0]
+        diff = pred - off_tr.markers[0]
+        _, proj, rot, _ = marker_series(diff, st, pred, np.ones(diff.shape[:2], bool))
+        dt = np.diff(f.times).mean()
+        accel = {n: np.gradient(np.gradient(x, dt), dt) for n, x in proj.items()}
+        out.append({"times": f.times - f.times[0], "series": proj | rot, "accel": accel,
+                    "covariates": fit.residuals[k].covariates})
+    return out
+
+
+def _growth_exponent(t: np.ndarray, x: np.ndarray) -> float:
+    """k in |x| ∝ t^k, fitted where |x| exceeds a tenth of its maximum (t > 0)."""
+    ok = np.isfinite(x) & (t > 0)
+    ax = np.abs(x[ok])
+    if ok.sum() < 5 or ax.max() == 0:
+        return float("nan")
+    sel = ax > 0.1 * ax.max()
+    if sel.sum() < 5:
+        return float("nan")
+    return float(np.polyfit(np.log(t[ok][sel]), np.log(ax[sel]), 1)[0])
+
+
+def _corr(a: np.ndarray, b: np.ndarray) -> float:
+    ok = np.isfinite(a) & np.isfinite(b)
+    if ok.sum() < 3 or np.std(a[ok]) == 0 or np.std(b[ok]) == 0:
+        return 0.0
+    return float(np.corrcoef(a[ok], b[ok])[0, 1])
+
+
+#: flight quantities the effect's force is compared with
+LINKS = {"α": lambda c: c["alpha"], "α²": lambda c: c["alpha"] ** 2, "speed": lambda c: c["speed"],
+         "speed²": lambda c: c["speed"] ** 2, "height": lambda c: c["height"]}
+#: |correlation| above which the force "tracks" a flight quantity
+LINK_CORRELATION = 0.8
+
+#: lever arm [m] turning an attitude change into marker motion when comparing rotations with translations
+LEVER_ARM = 0.1
+
+
+def fingerprint(before: ModelFit, after: ModelFit, names) -> dict:
+    """Where the mismatch sat (the base fit's structured series and flights) and what the accepted
+    parameters ``names`` do: main direction of their effect, its growth t^k, whether its sign follows the
+    spin across flights, and how its force (along the main direction) tracks α, α², speed, speed² and height
+    (|correlation|, median over flights)."""
+    level = structure_level(sum(len(per) for per in before.localisation.values()))
+    struct = {f: [s for s, d in per.items() if np.isfinite(d["ljung_box_p"]) and d["ljung_box_p"] < level]
+              for f, per in before.localisation.items()}
+    ratio = {}
+    for per in before.localisation.values():
+        for s, d in per.items():
+            ratio.setdefault(s, []).append(d["noise_ratio"])
+    sig = term_signature(after, names)
+    size = {n: np.median([np.sqrt(np.nanmean(g["series"][n] ** 2)) * (LEVER_ARM if n in ROTATIONS else 1.0)
+                          for g in sig]) for n in sig[0]["series"]}
+    trans = [n for n in size if n not in ROTATIONS]
+    main = max(trans, key=size.get)
+    main_rot = max(ROTATIONS, key=size.get)
+    growth, corr, signs = [], {c: [] for c in LINKS}, []
+    for g in sig:
+        growth.append(_growth_exponent(g["times"], g["series"][main]))
+        for c, f in LINKS.items():
+            corr[c].append(abs(_corr(g["accel"][main], f(g["covariates"]))))
+        x = g["series"][main]
+        signs.append((float(np.sign(x[np.nanargmax(np.abs(x))])), float(np.sign(np.mean(g["covariates"]["spin"])))))
+    follows = None
+    if len({s for _, s in signs}) > 1:
+        follows = len({a * s for a, s in signs if a != 0}) == 1
+    growth = [x for x in growth if np.isfinite(x)]
+    return {"structured_before": struct,
+            "noise_ratio_before": {s: float(np.median(v)) for s, v in ratio.items()},
+            "effect_series": main, "effect_rotation": main_rot if size[main_rot] > 0.5 * size[main] else None,
+            "effect_size_mm": {n: float(v * 1e3) for n, v in size.items()},
+            "growth_exponent": float(np.median(growth)) if growth else None,
+            "force_correlation": {c: float(np.median(v)) for c, v in corr.items()}, "sign_follows_spin": follows}
+
+
+SERIES_WORDS = {"along": "along-track", "lateral": "lateral", "normal": "vertical (flight-path normal)",
+                "d1": "disc-plane forward (d1)", "d2": "disc-plane sideways (d2)", "d3": "disc-normal (d3)",
+                "roll": "roll attitude (about d1)", "pitch": "pitch attitude (about d2)",
+                "spin_phase": "spin phase (about d3)"}
+
+
+def describe_where(fp: dict, n_flights: int) -> str:
+    """The fingerprint in words: where the residual structure sat, then what the added term does."""
+    flights = [f for f, s in fp["structured_before"].items() if s]
+    series = sorted({s for v in fp["structured_before"].values() for s in v},
+                    key=lambda s: -fp["noise_ratio_before"].get(s, 0.0))
+    if flights:
+        text = (f"{', '.join(SERIES_WORDS[s] for s in series[:3])} residuals structured in "
+                + ("every flight" if len(flights) == n_flights else f"{len(flights)} of {n_flights} flights ({', '.join(flights)})"))
+    else:
+        text = "residuals white, but the fit improves decisively"
+    effect = [f"the term moves the markers mainly {SERIES_WORDS[fp['effect_series']]}"
+              + (f" and turns the {SERIES_WORDS[fp['effect_rotation']]}" if fp["effect_rotation"] else "")]
+    g = fp["growth_exponent"]
+    if g is not None:
+        effect.append(f"growing ∝ t^{g:.1f}")
+    if fp["sign_follows_spin"] is True:
+        effect.append("sign follows spin")
+    elif fp["sign_follows_spin"] is False:
+        effect.append("sign independent of spin")
+    c = fp["force_correlation"]
+    best = max(c, key=c.get)
+    effect.append(f"its force tracks {best} best (|r| {c[best]:.2f})" if c[best] > LINK_CORRELATION
+                  else "its force follows no single flight quantity")
+    return f"{text}; {', '.join(effect)}"
