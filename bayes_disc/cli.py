@@ -52,6 +52,14 @@ def _cmd_identifiability(args) -> int:
     return 0
 
 
+def _cmd_diagnose(args) -> int:
+    from .diagnostics.diagnosis import run_diagnose
+    from .inference.config import load_config
+    cfg = load_config(args.config, output_override=args.output)
+    run_diagnose(cfg, sample=not args.no_sample, processes=args.processes, progress=not args.no_progress)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="bayes-disc", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action="version", version=f"bayes-disc {__version__}")
@@ -76,8 +84,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-design", action="store_true", help="skip the ranking of candidate throws")
     p.add_argument("--output", help="override the config's output folder")
     p.set_defaults(func=_cmd_identifiability)
+    p = sub.add_parser("diagnose", help="locate a model–data mismatch, name the missing physics, refit")
+    p.add_argument("config", help="CONFIG.yaml (SPEC §5)")
+    p.add_argument("--no-sample", action="store_true",
+                   help="least-squares estimates only (no emcee resampling with the accepted terms)")
+    p.add_argument("--processes", type=_positive_int, default=2, help="parallel candidate fits (default 2)")
+    p.add_argument("--output", help="override the config's output folder")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar while resampling")
+    p.set_defaults(func=_cmd_diagnose)
     _register_optional(sub)
     return parser
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be ≥ 1, got {value}")
+    return value
 
 
 def _register_optional(sub) -> None:

@@ -161,7 +161,7 @@ class Problem:
                       marker_body=self.marker_body, terms=terms, extension=ext, settings=settings,
                       want_states=want_states or bool(self.explanations))
         if self.explanations:
-            tr = replace(tr, markers=self._explained_markers(theta, tr.states))
+            tr = replace(tr, markers=self._explained_markers(theta, tr.states, f.times))
             if not want_states:
                 tr = replace(tr, states=None)
         return tr
@@ -178,7 +178,7 @@ class Problem:
                 cols.append(theta[:, own[t.id] + i] if t.id in own else np.full(theta.shape[0], par.off_value))
         return np.column_stack(cols)
 
-    def _explained_markers(self, theta: np.ndarray, states: np.ndarray) -> np.ndarray:
+    def _explained_markers(self, theta: np.ndarray, states: np.ndarray, times: np.ndarray) -> np.ndarray:
         """Markers (B, n, m, 3) with the data explanations' body and timing offsets applied."""
         m = self.marker_body.shape[0]
         body, timing = None, None
@@ -188,7 +188,7 @@ class Problem:
             body = b if b is not None else body
             timing = t if t is not None else timing
             j += len(params)
-        return predicted_markers(states, self.marker_body, body, timing, self.env.g)
+        return predicted_markers(states, self.marker_body, body, timing, times)
 
     def residuals(self, theta: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Observed-point residuals (B, n_coords_k) [m] (predicted − measured) and ok flags."""

@@ -10,10 +10,10 @@ with x the centre of mass [m], R the body-to-world rotation, b_j the configured 
 marker [m], Δ_j its body-frame offset (``marker_geometry``) and δ_j its timing offset [s]
 (``time_offset``). Over the few milliseconds of a timing offset the motion is advanced as
 
-    x(t + δ) = x + v δ − ½ g δ² ẑ,    R(t + δ) = R · exp([ω_B]× δ)
+    x(t + δ) = x + v δ + ½ a δ²,    R(t + δ) = R · exp([ω_B δ + ½ ω̇_B δ²]×)
 
-(ω_B the body angular velocity, rad/s; the aerodynamic acceleration, ≲ 10 m/s², contributes
-< 1e-5 m for |δ| ≤ 1 ms). A timing offset common to all markers is absorbed by the initial conditions,
+(ω_B the body angular velocity [rad/s]; a = dv/dt and ω̇_B from the sampled states by central
+differences; the neglected terms are O(δ³)). A timing offset common to all markers is absorbed by the initial conditions,
 so only the offsets of markers 2…m relative to marker 1 are parameters.
 """
 from __future__ import annotations
@@ -88,9 +88,9 @@ def get_explanations(ids) -> tuple[DataExplanation, ...]:
 
 
 def predicted_markers(states: np.ndarray, marker_body: np.ndarray, body_offset: np.ndarray | None,
-                      time_offset: np.ndarray | None, g: float) -> np.ndarray:
-    """Markers (B, n, m, 3) [m] from states (B, n, 13), body positions b (m, 3), body offsets Δ (B, m, 3)
-    and timing offsets δ (B, m) [s] (either may be None), gravity g [m/s²] (module equations)."""
+                      time_offset: np.ndarray | None, times: np.ndarray | None = None) -> np.ndarray:
+    """Markers (B, n, m, 3) [m] from states (B, n, 13) at ``times`` (n,) [s], body positions b (m, 3), body
+    offsets Δ (B, m, 3) and timing offsets δ (B, m) [s] (either may be None; times are needed with δ)."""
     B, n, _ = states.shape
     m = marker_body.shape[0]
     body = np.broadcast_to(marker_body, (B, m, 3)) if body_offset is None else marker_body[None] + body_offset
@@ -99,11 +99,12 @@ def predicted_markers(states: np.ndarray, marker_body: np.ndarray, body_offset: 
         R = quat_to_matrix(q.reshape(-1, 4)).reshape(B, n, 3, 3)
         return x[:, :, None, :] + np.einsum("bnij,bmj->bnmi", R, body)
     out = np.empty((B, n, m, 3))
-    down = np.array([0.0, 0.0, -1.0])
+    a = np.gradient(v, times, axis=1, edge_order=2) if n > 2 else np.zeros_like(v)
+    w_dot = np.gradient(w, times, axis=1, edge_order=2) if n > 2 else np.zeros_like(w)
     for j in range(m):
         dt = time_offset[:, j][:, None, None]                               # (B, 1, 1)
-        xj = x + v * dt + 0.5 * g * dt ** 2 * down
-        qj = quat_multiply(q.reshape(-1, 4), quat_from_rotvec((w * dt).reshape(-1, 3)))
+        xj = x + v * dt + 0.5 * a * dt ** 2
+        qj = quat_multiply(q.reshape(-1, 4), quat_from_rotvec((w * dt + 0.5 * w_dot * dt ** 2).reshape(-1, 3)))
         R = quat_to_matrix(qj).reshape(B, n, 3, 3)
         out[:, :, j] = xj + np.einsum("bnij,bj->bni", R, body[:, j])
     return out

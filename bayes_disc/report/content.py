@@ -404,18 +404,83 @@ def identifiability_section(ctx) -> Section:
     return Section("identifiability", "Identifiability", guide, "".join(parts), figs)
 
 
+SERIES_LABELS = {"along": "along-track [mm]", "lateral": "lateral [mm]", "normal": "vertical [mm]",
+                 "d1": "d1 [mm]", "d2": "d2 [mm]", "d3": "d3 [mm]", "roll": "roll [mrad]", "pitch": "pitch [mrad]",
+                 "spin_phase": "spin phase [mrad]"}
+
+
+def _estimate_text(est: dict) -> str:
+    return "; ".join(f"{n} = {v['value']:.4g} (95% {v['q025']:.4g} … {v['q975']:.4g})" for n, v in est.items())
+
+
+def _fixed(x, spec: str = ".1f") -> str:
+    return "–" if x is None or not np.isfinite(x) else format(x, spec)
+
+
+def _min_p(per: dict) -> str:
+    p = [v for v in per.values() if v is not None]
+    return f"{min(p):.1e}" if p else "–"
+
+
+def _diagnosis_figure(ctx, data: dict):
+    path = Path(ctx.run.run_dir) / "diagnosis_residuals.npz"
+    if not path.is_file():
+        return None
+    with np.load(path) as z:
+        series = {k: z[k] for k in z.files}
+    flights = [str(f) for f in series["flights"]]
+    names = []
+    for e in data.get("effects") or []:
+        fp = e.get("fingerprint") or {}
+        names += [fp.get("effect_series"), fp.get("effect_rotation")]
+    if not any(names):
+        worst = sorted((data.get("localisation_before") or {}).get(flights[0], {}).items(),
+                       key=lambda kv: (kv[1].get("ljung_box_p") or 1.0))
+        names = [k for k, _ in worst[:2]] or ["lateral", "roll"]
+    names = list(dict.fromkeys(n for n in names if n in SERIES_LABELS))[:3]
+    fig = F.diagnosis_figure(series, flights, names, SERIES_LABELS)
+    return _figure(ctx, fig, "diagnosis_residuals",
+                   "Residual series before (grey) and after (blue) the diagnosis' refit, per flight, in the "
+                   "directions where the accepted term acts; band: ±2 noise standard errors.")
+
+
 def missing_physics_section(ctx) -> Section:
     data = ctx.run.extras.get("diagnosis")
-    guide = "Whether the residuals call for physics the model lacks (side force, wind, ground effect …), best first."
+    guide = ("Whether the residuals call for physics the model lacks (side force, wind, ground effect …): every "
+             "candidate of the library is fitted and must earn its place by ΔBIC and leave white residuals.")
     if not data:
         html = ("<p class=placeholder>Not computed for this run: run <code>bayes-disc diagnose "
                 f"{esc(ctx.run.config_path)}</code> and rebuild the report.</p>")
         return Section("missing-physics", "Missing physics", guide, html)
-    effects = data.get("effects") or []
-    rows = [[e.get("id"), e.get("evidence"), e.get("estimate"), e.get("where")] for e in effects if isinstance(e, dict)]
+    effects = [e for e in data.get("effects") or [] if isinstance(e, dict)]
     before, after = data.get("rms_before_mm") or {}, data.get("rms_after_mm") or {}
-    html = (f"<p>Verdict: <b>{esc(data.get('verdict', '–'))}</b></p>"
-            + (table(["effect", "evidence", "estimate", "where"], rows) if rows else "")
-            + table(["flight", "RMS before [mm]", "RMS after [mm]"],
-                    [[f, fmt(before.get(f)), fmt(after.get(f))] for f in before]))
-    return Section("missing-physics", "Missing physics", guide, html)
+    wb, wa = data.get("whiteness_before") or {}, data.get("whiteness_after") or {}
+    words = "".join(f"<p>{esc(line)}</p>" for line in str(data.get("words", "")).splitlines())
+    parts = [f"<p>Verdict: <b>{esc(data.get('verdict', '–'))}</b></p>", words]
+    if effects:
+        parts.append(table(["effect", "ΔBIC", "estimate", "where"],
+                           [[e.get("id"), _fixed(e.get("evidence")), _estimate_text(e.get("estimate") or {}),
+                             e.get("where")] for e in effects]))
+    parts.append("<h3>Fit before and after</h3>" + table(
+        ["flight", "RMS before [mm]", "RMS after [mm]", "min Ljung–Box p before", "min Ljung–Box p after"],
+        [[f, fmt(before.get(f)), fmt(after.get(f)), _min_p(wb.get(f, {})), _min_p(wa.get(f, {}))] for f in before]))
+    moved = data.get("shifted_coefficients") or []
+    if moved:
+        parts.append("<h3>Base coefficients the missing term had biased</h3>" + table(
+            ["coefficient", "before", "after", "shift [before sd]"],
+            [[s["name"], f"{s['before']:.4g} ± {s['before_sd']:.2g}", f"{s['after']:.4g} ± {s['after_sd']:.2g}",
+              _fixed(s["shift_sd"], "+.1f")] for s in moved]))
+    unexplained = data.get("unexplained") or []
+    if unexplained:
+        parts.append("<h3>Unexplained</h3>" + table(
+            ["flight", "structured series", "largest at [s]", "model follows until [s]", "RMS [mm]"],
+            [[u["flight"], ", ".join(u["series"]), "–".join(f"{x:.2f}" for x in u["peak_window_s"]),
+              fmt(u.get("model_follows_until_s")), fmt(u.get("rms_mm"))] for u in unexplained]))
+    cands = data.get("candidates") or []
+    if cands:
+        parts.append("<h3>Every candidate</h3>" + table(
+            ["round", "candidate", "extra parameters", "ΔBIC", "status"],
+            [[c.get("round"), c.get("id"), c.get("extra_parameters"), _fixed(c.get("evidence")), c.get("status")]
+             for c in cands]))
+    fig = _diagnosis_figure(ctx, data)
+    return Section("missing-physics", "Missing physics", guide, "".join(parts), [fig] if fig else [])

@@ -331,3 +331,31 @@ def correlation_figure(corr: np.ndarray, names) -> Figure:
     fig.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="posterior correlation")
     fig.tight_layout()
     return fig
+
+
+def diagnosis_figure(series: dict, flights: list[str], names: list[str], labels: dict) -> Figure:
+    """Residual series before (grey) and after (blue) the accepted terms, one row per series in ``names``
+    (translations in mm, attitude angles in mrad), one column per flight; the band is ±2 noise standard
+    errors. ``series``: the arrays of ``diagnosis_residuals.npz``."""
+    n = len(flights)
+    fig = new_figure(max(6.0, 3.2 * n), 2.3 * len(names) + 0.8)
+    axes = fig.subplots(len(names), n, sharey="row", squeeze=False)
+    for c, flight in enumerate(flights):
+        t = series[f"{c}_times"]
+        for r, name in enumerate(names):
+            ax = axes[r, c]
+            scale = 1e3
+            se = series[f"{c}_se_{name}"] * scale
+            ax.fill_between(t, -2 * se, 2 * se, color="tab:blue", alpha=0.15, lw=0, label="±2 noise s.e." if r == c == 0 else None)
+            ax.plot(t, series[f"{c}_before_{name}"] * scale, ".", ms=2, color="0.55", label="before" if r == c == 0 else None)
+            ax.plot(t, series[f"{c}_after_{name}"] * scale, ".", ms=2, color="tab:blue", label="after" if r == c == 0 else None)
+            ax.axhline(0, color="k", lw=0.5)
+            ax.tick_params(labelsize=7)
+            if c == 0:
+                ax.set_ylabel(labels[name], fontsize=8)
+            if r == len(names) - 1:
+                ax.set_xlabel("t [s]", fontsize=9)
+        axes[0, c].set_title(flight, fontsize=10)
+    fig.legend(loc="upper center", ncol=3, fontsize=8, frameon=False, markerscale=4)
+    fig.subplots_adjust(left=0.08, right=0.98, top=0.9, bottom=0.1, hspace=0.2, wspace=0.1)
+    return fig
