@@ -69,6 +69,15 @@ def _posterior_estimates(run_dir: Path, names) -> dict:
     return out
 
 
+def _sampled_base(out: Path, base_ids) -> bool:
+    """Whether ``out`` holds a ``sample`` run of the base model (its posterior then gives "before")."""
+    try:
+        summary = json.loads((out / "summary.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return (out / "posterior.nc").is_file() and list(summary.get("physics_terms", [])) == list(base_ids)
+
+
 def coefficient_shifts(before: dict, after: dict) -> list[dict]:
     """Base coefficients whose estimate moved by more than SHIFT_SD of the base model's sd."""
     out = []
@@ -182,6 +191,8 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, log=pr
     final = diag.final
     result = {"verdict": diag.verdict, "effects": [], "rms_before_mm": base.rms_mm, "rms_after_mm": final.rms_mm}
     before_est = _ls_estimates(base, COEFFICIENT_NAMES)
+    if _sampled_base(out, base_ids):
+        before_est = _posterior_estimates(out, COEFFICIENT_NAMES)      # the `sample` run of the same model
     after_est = _ls_estimates(final, COEFFICIENT_NAMES + tuple(final.problem.ext_names))
     refit_dir = out / "diagnosis_refit"
     if diag.accepted and sample:

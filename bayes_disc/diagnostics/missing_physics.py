@@ -327,6 +327,26 @@ LINK_CORRELATION = 0.8
 LEVER_ARM = 0.1
 
 
+def attitude_offset(fit: ModelFit, z_min: float = 5.0) -> dict | None:
+    """The attitude angle whose mean residual stands out most (median over flights of |mean| / standard
+    error): {rotation, mean_deg per flight}, or None unless it exceeds ``z_min`` standard errors. A fit
+    that lacks a force often tilts the disc so that its lift supplies it: a steady attitude residual."""
+    best, best_z = None, z_min
+    for name in ROTATIONS:
+        z, means = [], {}
+        for fr, s in zip(fit.residuals, fit.ls.sigma):
+            x = fr.rotations[name]
+            ok = np.isfinite(x)
+            if ok.sum() < 3:
+                continue
+            se = s * np.sqrt(np.sum(fr.unit_se[name][ok] ** 2)) / ok.sum()
+            means[fr.name] = float(np.degrees(np.mean(x[ok])))
+            z.append(abs(np.mean(x[ok])) / se)
+        if z and np.median(z) > best_z:
+            best, best_z = {"rotation": name, "mean_deg": means}, float(np.median(z))
+    return best
+
+
 def fingerprint(before: ModelFit, after: ModelFit, names) -> dict:
     """Where the mismatch sat (the base fit's structured series and flights) and what the accepted
     parameters ``names`` do: main direction of their effect, its growth t^k, whether its sign follows the
@@ -356,7 +376,8 @@ def fingerprint(before: ModelFit, after: ModelFit, names) -> dict:
     if len({s for _, s in signs}) > 1:
         follows = len({a * s for a, s in signs if a != 0}) == 1
     growth = [x for x in growth if np.isfinite(x)]
-    return {"structured_before": struct,
+    offset = attitude_offset(before)
+    return {"structured_before": struct, "attitude_offset_before": offset,
             "noise_ratio_before": {s: float(np.median(v)) for s, v in ratio.items()},
             "effect_series": main, "effect_rotation": main_rot if size[main_rot] > 0.5 * size[main] else None,
             "effect_size_mm": {n: float(v * 1e3) for n, v in size.items()},
@@ -380,6 +401,11 @@ def describe_where(fp: dict, n_flights: int) -> str:
                 + ("every flight" if len(flights) == n_flights else f"{len(flights)} of {n_flights} flights ({', '.join(flights)})"))
     else:
         text = "residuals white, but the fit improves decisively"
+    off = fp.get("attitude_offset_before")
+    if off:
+        vals = list(off["mean_deg"].values())
+        text += (f" (the base fit makes up for it with the attitude: measured − fitted "
+                 f"{SERIES_WORDS[off['rotation']].split(' (')[0]} {min(vals):+.1f}…{max(vals):+.1f}° on average)")
     effect = [f"the term moves the markers mainly {SERIES_WORDS[fp['effect_series']]}"
               + (f" and turns the {SERIES_WORDS[fp['effect_rotation']]}" if fp["effect_rotation"] else "")]
     g = fp["growth_exponent"]

@@ -429,19 +429,23 @@ def _diagnosis_figure(ctx, data: dict):
     with np.load(path) as z:
         series = {k: z[k] for k in z.files}
     flights = [str(f) for f in series["flights"]]
-    names = []
+    loc = data.get("localisation_before") or {}
+    ratio = {}
+    for per in loc.values():
+        for name, d in per.items():
+            ratio.setdefault(name, []).append(d.get("noise_ratio") or 0.0)
+    rotations = ("roll", "pitch", "spin_phase")
+    by_structure = sorted(ratio, key=lambda n: -float(np.median(ratio[n])))
+    names = [next((n for n in by_structure if n not in rotations), "lateral"),
+             next((n for n in by_structure if n in rotations), "roll")]
     for e in data.get("effects") or []:
-        fp = e.get("fingerprint") or {}
-        names += [fp.get("effect_series"), fp.get("effect_rotation")]
-    if not any(names):
-        worst = sorted((data.get("localisation_before") or {}).get(flights[0], {}).items(),
-                       key=lambda kv: (kv[1].get("ljung_box_p") or 1.0))
-        names = [k for k, _ in worst[:2]] or ["lateral", "roll"]
+        names.append((e.get("fingerprint") or {}).get("effect_series"))
     names = list(dict.fromkeys(n for n in names if n in SERIES_LABELS))[:3]
     fig = F.diagnosis_figure(series, flights, names, SERIES_LABELS)
     return _figure(ctx, fig, "diagnosis_residuals",
-                   "Residual series before (grey) and after (blue) the diagnosis' refit, per flight, in the "
-                   "directions where the accepted term acts; band: ±2 noise standard errors.")
+                   "Residual series before (grey) and after (blue) the diagnosis' refit, per flight: the most "
+                   "structured translation and attitude series of the base fit and the direction in which the "
+                   "accepted term moves the markers; band: ±2 noise standard errors.")
 
 
 def missing_physics_section(ctx) -> Section:

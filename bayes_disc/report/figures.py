@@ -338,7 +338,8 @@ def diagnosis_figure(series: dict, flights: list[str], names: list[str], labels:
     (translations in mm, attitude angles in mrad), one column per flight; the band is ±2 noise standard
     errors. ``series``: the arrays of ``diagnosis_residuals.npz``."""
     n = len(flights)
-    fig = new_figure(max(6.0, 3.2 * n), 2.3 * len(names) + 0.8)
+    height = 2.3 * len(names) + 1.0
+    fig = new_figure(max(6.0, 3.2 * n), height)
     axes = fig.subplots(len(names), n, sharey="row", squeeze=False)
     for c, flight in enumerate(flights):
         t = series[f"{c}_times"]
@@ -347,7 +348,7 @@ def diagnosis_figure(series: dict, flights: list[str], names: list[str], labels:
             scale = 1e3
             se = series[f"{c}_se_{name}"] * scale
             ax.fill_between(t, -2 * se, 2 * se, color="tab:blue", alpha=0.15, lw=0, label="±2 noise s.e." if r == c == 0 else None)
-            ax.plot(t, series[f"{c}_before_{name}"] * scale, ".", ms=2, color="0.55", label="before" if r == c == 0 else None)
+            ax.plot(t, series[f"{c}_before_{name}"] * scale, ".", ms=3, color="0.45", label="before" if r == c == 0 else None)
             ax.plot(t, series[f"{c}_after_{name}"] * scale, ".", ms=2, color="tab:blue", label="after" if r == c == 0 else None)
             ax.axhline(0, color="k", lw=0.5)
             ax.tick_params(labelsize=7)
@@ -357,5 +358,5 @@ def diagnosis_figure(series: dict, flights: list[str], names: list[str], labels:
                 ax.set_xlabel("t [s]", fontsize=9)
         axes[0, c].set_title(flight, fontsize=10)
     fig.legend(loc="upper center", ncol=3, fontsize=8, frameon=False, markerscale=4)
-    fig.subplots_adjust(left=0.08, right=0.98, top=0.9, bottom=0.1, hspace=0.2, wspace=0.1)
+    fig.subplots_adjust(left=0.08, right=0.98, top=1 - 0.7 / height, bottom=0.5 / height, hspace=0.25, wspace=0.1)
     return fig
