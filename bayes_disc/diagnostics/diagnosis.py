@@ -101,8 +101,8 @@ def words(result: dict) -> str:
     if result["verdict"] == "adequate":
         best = result["candidates"][0] if result["candidates"] else None
         lines.append("The model is adequate: the residuals of every flight are white"
-                     + (f" and no candidate earns its place (best: {best['id']}, ΔBIC {best['evidence']:.1f} "
-                        f"≤ {EVIDENCE_THRESHOLD:.0f})." if best else "."))
+                     + (f" and no candidate earns its place (ΔBIC > {EVIDENCE_THRESHOLD:.0f} with white residuals; "
+                        f"best: {best['id']}, ΔBIC {best['evidence']:.1f})." if best else "."))
         lines.append("RMS " + ", ".join(f"{f} {v:.2f} mm" for f, v in before.items()) + ".")
         return "\n".join(lines)
     for e in result["effects"]:

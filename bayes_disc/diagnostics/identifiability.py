@@ -36,7 +36,7 @@ from ..inference.leastsq import whitened_jacobian
 from ..inference.model import Problem
 from ..observation.markers import FlightObservation
 from ..observation.synth import LaunchSpec
-from ..physics import COEFFICIENT_NAMES, LITERATURE
+from ..physics import LITERATURE
 from ..physics.frames import angle_of_attack
 
 #: offset–slope pairs whose separation needs a spread of angle of attack

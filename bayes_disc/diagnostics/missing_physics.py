@@ -10,8 +10,8 @@ the candidate is
     ΔBIC = Σ_f n_f ln(S_f,base / S_f,cand) − k ln N,
 
 k its extra parameters, N = Σ_f n_f. An extension must earn its place: ΔBIC > 10 ("very strong",
-Kass & Raftery 1995; a Bayes factor above e⁵) — for one parameter that is χ²₁ > 10 + ln N ≈ 19, a
-chance of 1e−5 when nothing is missing.
+Kass & Raftery 1995; a Bayes factor above e⁵) — for one parameter that is χ²₁ > 10 + ln N ≈ 18, a
+chance of 2e−5 when nothing is missing.
 
 Evidence alone would force any mismatch onto some term: a gust in one flight "improves" with a wind,
 a ground effect or a roll term, each absorbing a little of it. A candidate is therefore accepted only

@@ -239,7 +239,7 @@ def read_physics(path, sec: Section, marker_ids=None) -> dict:
         else:
             try:
                 (term,) = get_terms([tid])
-            except KeyError as e:
+            except KeyError:
                 known = sorted(TERMS) + (sorted(EXPLANATIONS) if marker_ids is not None else [])
                 raise ConfigError(path, f"physics.{tid}", f"unknown term {tid!r}; known: {known}") from None
             parameters = term.parameters
