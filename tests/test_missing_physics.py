@@ -217,3 +217,13 @@ def test_wrong_marker_geometry_is_named(tmp_path):
     assert all(abs(v / NOISE_MM - 1) < 0.15 for v in result["rms_after_mm"].values())
     est = result["effects"][0]["estimate"]
     assert abs(est["marker_b1_1"]["value"] - 0.003) < 4 * est["marker_b1_1"]["sd"] + 2e-4
+
+
+@pytest.mark.slow
+def test_unsynchronised_markers_are_named(tmp_path):
+    """Marker 1 recorded 0.3 ms late (synth's time_offset): a data explanation, not physics."""
+    result = diagnose(make_run(tmp_path, {"time_offset": {"dt_1": 0.0003}}, seed=3))
+    assert result["effects"][0]["id"] == "time_offset", result["words"]
+    assert all(abs(v / NOISE_MM - 1) < 0.15 for v in result["rms_after_mm"].values())
+    est = result["effects"][0]["estimate"]["dt_1"]
+    assert est["q025"] < 0.0003 < est["q975"], est

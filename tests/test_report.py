@@ -225,6 +225,25 @@ def test_later_capabilities_slot_in_as_sections(tiny, tmp_path):
         build_sections(ctx, [extra, extra])
 
 
+def test_diagnosis_adds_its_section_with_before_after_figure(tiny, tmp_path):
+    """`diagnose` on a sampled run folder rebuilds the report with the missing-physics section filled in."""
+    out = tmp_path / "out"
+    shutil.copytree(tiny["run"], out)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(tmp_path)
+        assert main(["diagnose", str(tiny["dir"] / "config.yaml"), "--no-sample", "--processes", "1",
+                     "--output", str(out)]) == 0
+    diagnosis = json.loads((out / "diagnosis.json").read_text())
+    html = (tmp_path / "reports" / "tiny.html").read_text(encoding="utf-8")
+    doc = _parse(html)
+    assert "missing-physics" in doc.section_ids and not doc.errors
+    section = html[html.index('<section id="missing-physics">'):]
+    assert f"Verdict: <b>{diagnosis['verdict']}</b>" in section
+    assert "Not computed" not in section and "Every candidate" in section
+    assert (out / "figures" / "diagnosis_residuals.png").is_file()
+    assert "diagnosis_residuals" in section
+
+
 def test_wind_tunnel_table_is_packaged():
     t = load_wind_tunnel()
     assert t.alpha_deg[0] == -100 and t.alpha_deg[-1] == 100 and t.alpha_deg.size == 41

@@ -6,7 +6,8 @@ release, ``alpha_deg``) and roll [deg], spin r [rad/s] (> 0 clockwise from above
 backhand) and optional wobble rates p, q [rad/s]; flight time [s], per-flight marker noise [mm] and a
 dropout fraction. Extra physics terms (``physics:``) make data with effects the base model lacks; a
 per-flight ``gust`` (a wind that blows only during a time window of one flight) makes a disturbance
-that no term of the library describes.
+that no term of the library describes; ``marker_geometry`` and ``time_offset`` in ``physics:`` make
+recordings whose markers sit elsewhere on the disc or are recorded at shifted times.
 Output: a SPEC §4 marker file and a truth JSON (coefficients, terms, initial states, noise).
 """
 from __future__ import annotations
@@ -79,7 +80,8 @@ class SynthSpec:
 
     @property
     def terms(self):
-        return get_terms(list(self.physics))
+        """Physics terms of the data (the ``physics`` entries that are not data explanations)."""
+        return get_terms([i for i in self.physics if i not in EXPLANATIONS])
 
     def extension(self) -> np.ndarray:
         vals = []
@@ -96,8 +98,8 @@ class SynthSpec:
 
 def _simulate_flight(spec: SynthSpec, f: LaunchSpec, y0: np.ndarray, times: np.ndarray, mb: np.ndarray, terms,
                      ext: np.ndarray):
-    """One flight's trajectory; with a gust, three segments (before, during with the gust's wind added,
-    after), each started from the previous one's final state."""
+    """One flight's trajectory from its release at t = 0 to ``times`` (≥ 0); with a gust, three segments
+    (before, during with the gust's wind added, after), each started from the previous one's final state."""
     def run(y, ts, t0, gust=None):
         tt, ee = terms, ext
         if gust is not None:
@@ -114,11 +116,11 @@ def _simulate_flight(spec: SynthSpec, f: LaunchSpec, y0: np.ndarray, times: np.n
             raise ValueError(f"synthetic flight {f.name!r}: simulation failed ({tr.failure_reasons()[0]})")
         return tr
     if f.gust is None:
-        return run(y0, times, times[0])
+        return run(y0, times, 0.0)
     g0, g1 = float(f.gust[0]), float(f.gust[1])
     w = np.asarray(f.gust[2:5], float)
-    cuts = [times[0], g0, g1, np.inf]
-    states, markers, y, t_start = [], [], y0, times[0]
+    cuts = [0.0, g0, g1, np.inf]
+    states, markers, y, t_start = [], [], y0, 0.0
     for i in range(3):
         sel = (times >= cuts[i]) & (times < cuts[i + 1])
         end = min(cuts[i + 1], times[-1])
@@ -129,6 +131,27 @@ def _simulate_flight(spec: SynthSpec, f: LaunchSpec, y0: np.ndarray, times: np.n
         y, t_start = tr.states[0, -1], end
     return Trajectories(times=times, states=np.concatenate(states)[None], markers=np.concatenate(markers)[None],
                         status=np.zeros(1, int))
+
+
+def _recorded_markers(spec: SynthSpec, f: LaunchSpec, y0, times, mb, terms, ext, markers) -> np.ndarray:
+    """Markers as recorded, with the data explanations of ``spec.physics`` applied exactly: marker j sits
+    at b_j + Δ_j (``marker_geometry``) and is recorded at t + δ_j (``time_offset``; all δ shifted by a
+    common amount so that no marker is recorded before the release, which the fit absorbs)."""
+    ids = tuple(spec.markers)
+    geo, tim = spec.physics.get("marker_geometry"), spec.physics.get("time_offset")
+    if not geo and not tim:
+        return markers
+    delta = np.zeros_like(mb)
+    if geo:
+        for j, m in enumerate(ids):
+            delta[j] = [geo.get(f"marker_{a}_{m}", 0.0) for a in ("b1", "b2", "b3")]
+    dt = np.array([0.0] + [(tim or {}).get(f"dt_{m}", 0.0) for m in ids[1:]])
+    dt -= min(0.0, dt.min())
+    out = np.empty_like(markers)
+    for j in range(len(ids)):
+        tr = _simulate_flight(spec, f, y0, times + dt[j], (mb[j] + delta[j])[None], terms, ext)
+        out[:, j] = tr.markers[0, :, 0]
+    return out
 
 
 @dataclass
@@ -149,8 +172,9 @@ def synthesize(spec: SynthSpec) -> SynthResult:
         y0 = f.initial_state(spec.wind())
         tr = _simulate_flight(spec, f, y0, times, mb, terms, ext)
         states = tr.states[0]
+        recorded = _recorded_markers(spec, f, y0, times, mb, terms, ext, tr.markers[0])
         sigma = f.noise_mm / 1000.0
-        pos = tr.markers[0] + rng.normal(0.0, sigma, tr.markers[0].shape)
+        pos = recorded + rng.normal(0.0, sigma, recorded.shape)
         drop = rng.random(pos.shape[:2]) < f.dropout
         pos[drop] = np.nan
         flights.append(FlightObservation(name=f.name, source="synth", times=times, marker_ids=ids, positions=pos))
@@ -272,7 +296,7 @@ def load_synth_spec(path) -> tuple[SynthSpec, Path, Path]:
     coef = _coefficients(path, sec)
     disc, env = read_disc_env(path, sec)
     markers = read_markers(path, sec, DEFAULT_MARKERS)
-    physics = read_physics(path, sec)
+    physics = read_physics(path, sec, marker_ids=tuple(markers))
     out = sec.section("output")
     markers_path = path.parent / out.string("markers", f"{name}_markers.csv")
     truth_path = path.parent / out.string("truth", f"{name}_truth.json")
