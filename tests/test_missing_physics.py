@@ -138,7 +138,7 @@ def test_evidence_charges_for_parameters(tmp_path):
 def test_diagnose_names_a_concealed_side_force(tmp_path, capsys):
     """The command on data with a concealed side force: SPEC §6 file, words, the right term, the gain."""
     cfg = make_run(tmp_path, CONCEALED["side_force"], seed=3)
-    assert main(["diagnose", str(cfg), "--no-sample", "--processes", "1"]) == 0
+    assert main(["diagnose", str(cfg), "--no-sample", "--processes", "2"]) == 0   # forked candidate fits
     out = capsys.readouterr().out
     result = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
     assert {"verdict", "effects", "rms_before_mm", "rms_after_mm"} <= set(result)

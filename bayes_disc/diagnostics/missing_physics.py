@@ -176,6 +176,10 @@ def fit_candidates(base: ModelFit, build, ids, processes: int = 1, max_nfev: int
         p.kernel_terms = tuple(TERMS.values())      # one compiled kernel for every candidate
     tasks = [(p, candidate_starts(base, p), base.ls.sigma, max_nfev) for p in problems.values()]
     if processes > 1 and len(tasks) > 1:
+        # compile the shared kernel (both batch widths) here, once, so the forked workers inherit it
+        p, x0 = next(iter(problems.values())), tasks[0][1][0]
+        p.residuals(x0[None], 0)
+        p.residuals(np.repeat(x0[None], 2 * p.flight_columns(0).size, axis=0), 0)
         with mp.get_context("fork").Pool(min(processes, len(tasks))) as pool:
             results = pool.map(_fit_task, tasks, chunksize=1)
     else:
