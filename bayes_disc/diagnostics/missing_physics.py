@@ -124,8 +124,7 @@ class Candidate:
 
 
 def judge(base: ModelFit, cand_id: str, fit: ModelFit, threshold: float = EVIDENCE_THRESHOLD) -> Candidate:
-    n = base.problem.n_coords.astype(float)
-    gain = n * np.log(base.ss / fit.ss)
+    gain = base.problem.n_coords * np.log(base.ss / fit.ss)
     c = Candidate(cand_id, fit, evidence(base, fit), {f.name: float(g) for f, g in zip(base.problem.flights, gain)},
                   structured(fit), extra_parameters=fit.problem.n_ext - base.problem.n_ext)
     clean = np.array([not c.structured_after[f.name] for f in base.problem.flights])
@@ -356,9 +355,7 @@ def fingerprint(before: ModelFit, after: ModelFit, names) -> dict:
     parameters ``names`` do: main direction of their effect, its growth t^k, whether its sign follows the
     spin across flights, and how its force (along the main direction) tracks α, α², speed, speed² and height
     (|correlation|, median over flights)."""
-    level = structure_level(sum(len(per) for per in before.localisation.values()))
-    struct = {f: [s for s, d in per.items() if np.isfinite(d["ljung_box_p"]) and d["ljung_box_p"] < level]
-              for f, per in before.localisation.items()}
+    struct = structured(before)
     ratio = {}
     for per in before.localisation.values():
         for s, d in per.items():
