@@ -36,7 +36,6 @@ def _fit_base(physics):
     starts = [initial_state_from_data(f, mb) for f in data.flights]
     problem = Problem(flights=data.flights, marker_body=mb, disc=SynthSpec(name="x", flights=()).disc,
                       env=SynthSpec(name="x", flights=()).env, prior_name="weak", start_states=starts)
-    problem.rates = [problem.flight_rate(s) for s in starts]
     ls = fit_least_squares(problem, starts=2)
     return problem, ls
 

@@ -20,8 +20,8 @@ import numpy as np
 from ..inference.config import RunConfig
 from ..inference.data import build_problem, load_run_flights
 from ..inference.leastsq import fit_least_squares
-from ..observation.explanations import EXPLANATIONS
-from ..physics import COEFFICIENT_NAMES, TERMS
+from ..observation.registry import unit
+from ..physics import COEFFICIENT_NAMES
 from .missing_physics import (CANDIDATES, EVIDENCE_THRESHOLD, Diagnosis, ModelFit, describe_where, diagnose,
                               fingerprint, model_fit)
 from .missing_physics import SERIES_WORDS, onset_of_mismatch
@@ -33,14 +33,11 @@ SHIFT_SD = 2.0
 
 def unit_parameter_names(unit_id: str, marker_ids) -> tuple[str, ...]:
     """Extra parameter names of a physics term or data explanation."""
-    if unit_id in TERMS:
-        return TERMS[unit_id].parameter_names
-    return tuple(p.name for p in EXPLANATIONS[unit_id].parameters_for(tuple(marker_ids)))
+    return unit(unit_id).parameter_names(tuple(marker_ids))
 
 
 def _title(term_id: str) -> str:
-    unit = TERMS.get(term_id) or EXPLANATIONS.get(term_id)
-    return unit.title if unit is not None else term_id
+    return unit(term_id).title
 
 
 def _whiteness(fit: ModelFit) -> dict:

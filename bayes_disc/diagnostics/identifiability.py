@@ -204,11 +204,9 @@ def throw_information(problem: Problem, theta: np.ndarray, launch: LaunchSpec, s
 
     def one_flight(positions) -> Problem:
         obs = FlightObservation(name=launch.name, source="design", times=times, marker_ids=ids, positions=positions)
-        sub = Problem(flights=[obs], marker_body=problem.marker_body, disc=problem.disc, env=problem.env,
-                      prior_name=problem.prior_name, terms=problem.terms, start_states=[y0],
-                      settings=problem.settings)
-        sub.rates = [sub.flight_rate(y0)]
-        return sub
+        return Problem(flights=[obs], marker_body=problem.marker_body, disc=problem.disc, env=problem.env,
+                       prior_name=problem.prior_name, terms=problem.terms, explanations=problem.explanations,
+                       term_start=problem.term_start, start_states=[y0], settings=problem.settings)
 
     sub = one_flight(np.zeros((times.size, len(ids), 3)))
     x = np.r_[theta[: problem.ic_start], sub.state_to_ic(y0, 0)]

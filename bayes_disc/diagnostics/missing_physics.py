@@ -1,7 +1,7 @@
 """Missing physics: locate a mismatch, name the term of the library that explains it, show the gain.
 
-Every candidate — the physics terms of :data:`bayes_disc.physics.TERMS` and the data explanations of
-:data:`bayes_disc.observation.explanations.EXPLANATIONS` not already in the model — is added to the model
+Every candidate — the physics terms and data explanations of :mod:`bayes_disc.observation.registry`
+(``MODEL_EXTENSIONS``) not already in the model — is added to the model
 and the joint least-squares fit is refined from the base optimum. With the noise scale σ_f of every
 flight profiled out, the Gaussian log-likelihood is −½ Σ_f n_f ln S_f + const (S_f: the flight's summed
 squared marker residuals, n_f its coordinates), so the Bayesian information criterion in favour of
@@ -24,7 +24,7 @@ window where it is strongest.
 from __future__ import annotations
 
 import multiprocessing as mp
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -32,12 +32,12 @@ from scipy.optimize import least_squares
 
 from ..inference.leastsq import LeastSquaresResult, refine_least_squares, whitened_jacobian, whitened_residuals
 from ..inference.model import Problem
-from ..observation.explanations import EXPLANATIONS
+from ..observation.registry import MODEL_EXTENSIONS
 from ..physics import TERMS, literature_coefficients
 from .residuals import ROTATIONS, flight_residuals, localise, marker_series
 
 #: every candidate, physics terms first
-CANDIDATES = tuple(TERMS) + tuple(EXPLANATIONS)
+CANDIDATES = MODEL_EXTENSIONS
 #: ΔBIC an extension must exceed
 EVIDENCE_THRESHOLD = 10.0
 #: family-wise chance of calling a correctly specified data set structured (Bonferroni over its series)
@@ -88,16 +88,7 @@ def structured(fit: ModelFit, alpha: float = STRUCTURE_ALPHA) -> dict:
 def extend_theta(theta: np.ndarray, source: Problem, target: Problem) -> np.ndarray:
     """θ of ``source`` mapped into ``target`` (same flights, more extra parameters): shared entries copied,
     new extra parameters at their starting values (the value that switches them off)."""
-    out = target.prior_mean.copy()
-    if target.term_start is not None and target.n_ext:
-        out[target.n_coef: target.ic_start] = target.term_start
-    out[: source.n_coef] = theta[: source.n_coef]
-    src = dict(zip(source.ext_names, theta[source.n_coef: source.ic_start]))
-    for j, name in enumerate(target.ext_names, start=target.n_coef):
-        if name in src:
-            out[j] = src[name]
-    out[target.ic_start:] = theta[source.ic_start:]
-    return out
+    return target.layout.transfer(theta, source.layout, target.start_vector())
 
 
 def evidence(base: ModelFit, cand: ModelFit, flights: np.ndarray | None = None) -> float:
@@ -143,9 +134,7 @@ def candidate_starts(base: ModelFit, problem: Problem) -> list[np.ndarray]:
     enough: its initial conditions have absorbed part of the missing effect (a tilted, wobbling launch
     mimicking a side force, say), a valley from which the extension's parameter does not escape."""
     extended = extend_theta(base.ls.theta, base.problem, problem)
-    fresh = problem.prior_mean.copy()
-    if problem.term_start is not None and problem.n_ext:
-        fresh[problem.n_coef: problem.ic_start] = problem.term_start
+    fresh = problem.start_vector()
     fresh[: problem.n_coef] = base.ls.theta[: problem.n_coef]
     literature = fresh.copy()
     literature[: problem.n_coef] = literature_coefficients("potts_crowther").as_array()
@@ -242,7 +231,7 @@ def _prefix_is_white(fit: ModelFit, k: int, t_end: float, alpha: float) -> bool:
     coefficients and extra parameters of ``fit`` held, leaves white residuals (all nine series)."""
     p = fit.problem
     f = p.flights[k].window(None, t_end)
-    sub = replace(p, flights=[f], start_states=[p.start_states[k]], rates=[p.rates[k]] if p.rates else [])
+    sub = p.subset(k, f)
     fixed = fit.ls.theta[: p.ic_start]
     sigma = fit.ls.sigma[k: k + 1]
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..observation.config_io import ConfigError
-from ..observation.explanations import EXPLANATIONS, get_explanations
 from ..observation.markers import load_flights
-from ..physics import SimulatorSettings, get_terms
+from ..observation.registry import split_extensions
+from ..physics import SimulatorSettings
 from .config import RunConfig
 from .initial import initial_state_from_data
 from .model import Problem
@@ -46,12 +46,10 @@ def build_problem(cfg: RunConfig, terms_override=None, flights=None) -> Problem:
         except ValueError as e:
             raise ConfigError(cfg.path, "flights", str(e)) from None
     ids = list(cfg.physics) if terms_override is None else list(terms_override)
-    terms = get_terms([i for i in ids if i not in EXPLANATIONS])
-    explanations = get_explanations([i for i in ids if i in EXPLANATIONS])
+    terms, explanations = split_extensions(ids)
     settings = SimulatorSettings(method=cfg.simulator_method, step_factor=cfg.simulator_step_factor)
-    problem = Problem(flights=flights, marker_body=mb, disc=cfg.disc, env=cfg.env, prior_name=cfg.prior,
-                      terms=terms, explanations=explanations, start_states=starts, settings=settings)
     given = {name: v for tid in ids for name, v in cfg.physics.get(tid, {}).items()}
-    problem.term_start = np.array([given.get(p.name, p.off_value) for p in problem.ext_parameters], float)
-    problem.rates = [problem.flight_rate(s) for s in starts]
-    return problem
+    ext = [p for t in terms for p in t.parameters] + [p for e in explanations for p in e.parameters_for(cfg.marker_ids)]
+    return Problem(flights=flights, marker_body=mb, disc=cfg.disc, env=cfg.env, prior_name=cfg.prior,
+                   terms=terms, explanations=explanations, start_states=starts, settings=settings,
+                   term_start=np.array([given.get(p.name, p.off_value) for p in ext], float))

@@ -16,7 +16,7 @@ FAILED_RESIDUAL = 1e3  # whitened residual standing in for a failed simulation
 @dataclass
 class LeastSquaresResult:
     theta: np.ndarray            # (dim,) optimum
-    sigma: np.ndarray            # (n_flights,) noise scale per flight [m]: residual RMS at the optimum
+    sigma: np.ndarray            # (n_groups,) noise scale per noise group (per flight for markers) [m]: residual RMS
     cov: np.ndarray              # (dim, dim) Gauss–Newton covariance (prior included)
     cost: float                  # ½ Σ whitened residual² at the optimum
     condition_number: float      # of the scale-free (correlation-normalised) information matrix
@@ -46,7 +46,7 @@ def whitened_residuals(x: np.ndarray, problem: Problem, sigma: np.ndarray) -> np
     theta = x[None]
     for k in range(problem.n_flights):
         r, ok = problem.residuals(theta, k)
-        r = r[0] / sigma[k]
+        r = r[0] / sigma[problem.residual_groups(k)]
         if not ok[0] or not np.all(np.isfinite(r)):
             r = np.full(r.shape, FAILED_RESIDUAL)
         parts.append(r)
@@ -65,7 +65,7 @@ def whitened_jacobian(x: np.ndarray, problem: Problem, sigma: np.ndarray) -> np.
         lanes[np.arange(cols.size), cols] += h[cols]
         lanes[cols.size + np.arange(cols.size), cols] -= h[cols]
         r, ok = problem.residuals(lanes, k)
-        d = (r[: cols.size] - r[cols.size:]) / (2 * h[cols])[:, None] / sigma[k]
+        d = (r[: cols.size] - r[cols.size:]) / (2 * h[cols])[:, None] / sigma[problem.residual_groups(k)]
         d[~(ok[: cols.size] & ok[cols.size:])] = 0.0
         J = np.zeros((r.shape[1], n_x))
         J[:, cols] = d.T
@@ -75,9 +75,7 @@ def whitened_jacobian(x: np.ndarray, problem: Problem, sigma: np.ndarray) -> np.
 
 
 def _starts(problem: Problem, n: int, rng: np.random.Generator) -> list[np.ndarray]:
-    base = problem.prior_mean.copy()
-    if problem.term_start is not None and problem.n_ext:
-        base[problem.n_coef: problem.ic_start] = problem.term_start
+    base = problem.start_vector()
     out = []
     for key in ("potts_crowther", "hummel2002"):
         x = base.copy()
@@ -95,7 +93,7 @@ def _starts(problem: Problem, n: int, rng: np.random.Generator) -> list[np.ndarr
 def fit_least_squares(problem: Problem, starts: int = 4, max_nfev: int = 200, seed: int = 0,
                       sigma0: float = 2e-3, progress=None) -> LeastSquaresResult:
     rng = np.random.default_rng(seed)
-    sigma = np.full(problem.n_flights, sigma0)
+    sigma = np.full(problem.n_groups, sigma0)
     results = []
     for i, x0 in enumerate(_starts(problem, starts, rng)):
         res = least_squares(whitened_residuals, x0, jac=whitened_jacobian, args=(problem, sigma), method="trf",
@@ -150,11 +148,16 @@ def condition_number(J: np.ndarray) -> float:
 
 
 def _rms(problem: Problem, x: np.ndarray) -> np.ndarray:
-    out = np.empty(problem.n_flights)
+    """(n_groups,) residual RMS per noise group at x (1 cm where the simulation failed)."""
+    out = np.empty(problem.n_groups)
     theta = x[None]
     for k in range(problem.n_flights):
         r, ok = problem.residuals(theta, k)
-        out[k] = np.sqrt(np.mean(r[0] ** 2)) if ok[0] else 1e-2
+        g = problem.residual_groups(k)
+        ms = np.bincount(g, weights=r[0] ** 2, minlength=problem.n_groups) / np.maximum(
+            np.bincount(g, minlength=problem.n_groups), 1)
+        groups = problem.flight_groups(k)
+        out[groups] = np.sqrt(ms[groups]) if ok[0] else 1e-2
     return np.maximum(out, 1e-5)
 
 

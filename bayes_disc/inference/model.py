@@ -1,11 +1,12 @@
-"""The statistical model: parameter vector, priors, simulated markers and the log-posterior.
+"""The statistical model: priors, simulated flights, the observation models and the log-posterior.
 
-θ = [10 coefficients, extra-term parameters, per flight: position (3) m, velocity (3) m/s, attitude
-rotation vector (3) rad, body angular velocity (3) rad/s].
-The attitude is q = q_ref ⊗ exp(ϑ) with q_ref the data-derived start: no singularity near the data.
+θ is laid out by :class:`.layout.ParameterLayout` (coefficients, extension parameters, per flight its
+initial conditions and observation-model parameters). The attitude is q = q_ref ⊗ exp(ϑ) with q_ref the
+data-derived start: no singularity near the data.
 
-Likelihood: independent Gaussian marker coordinates with one noise scale σ_f per flight, prior
-p(σ_f) ∝ 1/σ_f (Jeffreys). σ_f is integrated out analytically,
+Likelihood: every flight carries one or more observation models (:mod:`bayes_disc.observation.models`);
+the log-likelihood is their sum. Each model's noise groups have one scale σ_g with the Jeffreys prior
+p(σ_g) ∝ 1/σ_g. For the marker model (one group per flight) σ_f is integrated out analytically,
 
     p(y_f | θ) = ∫ N(y_f | m_f(θ), σ_f² I) dσ_f/σ_f = ½ Γ(n_f/2) (π S_f)^(−n_f/2),   S_f = Σ residual²,
 
@@ -15,25 +16,54 @@ joint posterior far from Gaussian), and σ_f is then drawn exactly from its cond
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..observation.explanations import DataExplanation, predicted_markers
+from ..observation.explanations import DataExplanation
 from ..observation.markers import FlightObservation
+from ..observation.models import MarkerPositions, ObservationModel
 from ..physics import COEFFICIENT_NAMES, Disc, Environment, SimulatorSettings, Term, simulate
-from ..physics.frames import quat_from_rotvec, quat_multiply
-from scipy.special import gammaln
-
+from ..physics.frames import quat_from_rotvec, quat_multiply, quat_to_rotvec
+from .layout import IC_NAMES, ParameterLayout
 from .priors import IC_SD, coefficient_prior
 
-IC_NAMES = ("x", "y", "z", "vx", "vy", "vz", "th1", "th2", "th3", "wx", "wy", "wz")
-IC_UNITS = ("m", "m", "m", "m/s", "m/s", "m/s", "rad", "rad", "rad", "rad/s", "rad/s", "rad/s")
+__all__ = ["Problem", "IC_NAMES"]
 
 
 @dataclass
 class Problem:
-    """Everything the log-posterior needs; built once per run."""
+    """Everything the log-posterior needs; complete when constructed.
+
+    Parameters
+    ----------
+    flights : list of FlightObservation
+        Marker recordings, one per flight (sample times (n,) [s], positions (n, m, 3) [m]).
+    marker_body : (m, 3) array
+        Configured body-frame marker positions [m].
+    disc, env : Disc, Environment
+        Constants of the flight model.
+    prior_name : str
+        Coefficient prior (``potts_crowther`` or ``weak``).
+    terms : tuple of Term
+        Extra physics terms of the model.
+    explanations : tuple of DataExplanation
+        Data explanations of the recordings (marker geometry, timing).
+    start_states : list of (13,) arrays
+        Data-derived start state of every flight (centres the initial-condition priors).
+    term_start : (n_ext,) array, optional
+        Starting values of the extension parameters; default: the values that switch them off.
+    settings : SimulatorSettings
+        Integrator settings.
+    rates : list of float, optional
+        Fixed integration rate per flight [rad/s]; default: :meth:`flight_rate` of each start state.
+    kernel_terms : tuple of Term
+        If set, a superset of ``terms`` to integrate with (absent ones off): one compiled kernel then
+        serves many models (missing-physics search).
+    observations : list of tuple of ObservationModel, optional
+        Per flight, its observation models (every one predicts from the flight's simulation on the
+        flight's sample times); default: one :class:`MarkerPositions` per flight, with the explanations.
+    """
 
     flights: list[FlightObservation]
     marker_body: np.ndarray
@@ -41,78 +71,129 @@ class Problem:
     env: Environment
     prior_name: str
     terms: tuple[Term, ...] = ()
-    explanations: tuple[DataExplanation, ...] = ()  # data explanations (marker geometry, timing)
-    term_start: np.ndarray | None = None          # starting values of the extra-term parameters
-    start_states: list[np.ndarray] = field(default_factory=list)  # data-derived (13,) per flight
+    explanations: tuple[DataExplanation, ...] = ()
+    start_states: list[np.ndarray] = field(default_factory=list)
+    term_start: np.ndarray | None = None
     settings: SimulatorSettings = SimulatorSettings()
-    rates: list[float] = field(default_factory=list)  # fixed integration rate per flight [rad/s]
-    kernel_terms: tuple[Term, ...] = ()  # if set, a superset of ``terms`` to integrate with (absent ones off):
-    #                                     one compiled kernel then serves many models (missing-physics search)
+    rates: list[float] | None = None
+    kernel_terms: tuple[Term, ...] = ()
+    observations: list[tuple[ObservationModel, ...]] | None = None
 
     def __post_init__(self):
-        self.n_coef = len(COEFFICIENT_NAMES)
+        if len(self.start_states) != len(self.flights):
+            raise ValueError(f"{len(self.flights)} flights but {len(self.start_states)} start states")
         self.marker_ids = tuple(self.flights[0].marker_ids) if self.flights else ()
-        self.n_phys = sum(len(t.parameters) for t in self.terms)
-        self.n_ext = self.n_phys + sum(len(p) for p in self._explanation_parameters())
-        self.n_flights = len(self.flights)
-        self.ic_start = self.n_coef + self.n_ext
-        self.dim = self.ic_start + 12 * self.n_flights
+        if self.observations is None:
+            self.observations = [(MarkerPositions(f, self.marker_body, tuple(self.explanations)),)
+                                 for f in self.flights]
+        if len(self.observations) != len(self.flights) or not all(self.observations):
+            raise ValueError("observations needs at least one observation model per flight")
+        self.channels: list[tuple[ObservationModel, ...]] = [tuple(ch) for ch in self.observations]
+        expl = tuple(p for e in self.explanations for p in e.parameters_for(self.marker_ids))
+        self.layout = ParameterLayout(terms=tuple(self.terms), explanation_parameters=expl,
+                                      flight_names=tuple(f.name for f in self.flights),
+                                      flight_parameters=tuple(tuple(p for c in ch for p in c.parameters)
+                                                              for ch in self.channels))
+        L = self.layout
+        self.n_coef, self.n_phys, self.n_ext = L.n_coef, L.n_phys, L.n_ext
+        self.n_flights, self.ic_start, self.dim = L.n_flights, L.ic_start, L.dim
+        self.term_start = L.off_values() if self.term_start is None else np.asarray(self.term_start, float)
+        if self.term_start.shape != (self.n_ext,):
+            raise ValueError(f"term_start has shape {self.term_start.shape}, the model has {self.n_ext} "
+                             "extension parameters")
+        if self.rates is None:
+            self.rates = [self.flight_rate(s) for s in self.start_states]
         self.q_ref = [s[6:10] / np.linalg.norm(s[6:10]) for s in self.start_states]
-        self._masks = [f.observed for f in self.flights]
-        self._obs = [f.positions[f.observed] for f in self.flights]
-        self.n_coords = np.array([3 * m.sum() for m in self._masks])
-        mean, sd = self._prior_arrays()
-        self.prior_mean, self.prior_sd = mean, sd
+        # noise groups: every channel's, in flight order; _groups[k][c] = slice of channel c of flight k
+        self.noise_names, self._groups, sizes, g = [], [], [], 0
+        for ch in self.channels:
+            per = []
+            for c in ch:
+                per.append(slice(g, g + len(c.noise_names)))
+                self.noise_names += list(c.noise_names)
+                sizes += list(c.group_sizes)
+                g += len(c.noise_names)
+            self._groups.append(per)
+        self.n_coords = np.array(sizes)
+        self._residual_groups = [np.concatenate([c.group_index + s.start for c, s in zip(ch, per)])
+                                 for ch, per in zip(self.channels, self._groups)]
+        self.prior_mean, self.prior_sd = self._prior_arrays()
 
-    # -- names ------------------------------------------------------------------------------------------
-    def _explanation_parameters(self) -> list[tuple]:
-        return [e.parameters_for(self.marker_ids) for e in self.explanations]
-
+    # -- names (asked of the layout) -------------------------------------------------------------------
     @property
     def ext_parameters(self) -> list:
-        """:class:`~bayes_disc.physics.TermParameter` of every extra parameter, in θ order."""
-        return [p for t in self.terms for p in t.parameters] + [p for ps in self._explanation_parameters() for p in ps]
+        """:class:`~bayes_disc.physics.TermParameter` of every extension parameter, in θ order."""
+        return list(self.layout.ext_parameters)
 
     @property
     def ext_names(self) -> list[str]:
-        return [p.name for p in self.ext_parameters]
+        return self.layout.ext_names
 
     @property
     def model_ids(self) -> list[str]:
-        """SPEC ids of the model's extra physics terms and data explanations."""
+        """Ids of the model's extra physics terms and data explanations."""
         return [t.id for t in self.terms] + [e.id for e in self.explanations]
 
     @property
     def names(self) -> list[str]:
-        out = list(COEFFICIENT_NAMES) + self.ext_names
-        for f in self.flights:
-            out += [f"{n}_{f.name}" for n in IC_NAMES]
-        return out
+        return self.layout.names
 
     @property
     def sigma_names(self) -> list[str]:
-        return [f"sigma_{f.name}" for f in self.flights]
+        """Public names of the noise scales (one per noise group; ``sigma_<flight>`` for markers)."""
+        return list(self.noise_names)
+
+    @property
+    def n_groups(self) -> int:
+        return len(self.noise_names)
 
     def ic_slice(self, k: int) -> slice:
-        return slice(self.ic_start + 12 * k, self.ic_start + 12 * (k + 1))
+        return self.layout.ic_slice(k)
 
     def flight_columns(self, k: int) -> np.ndarray:
-        """Indices of θ that flight k's markers depend on (coefficients, extra terms, its own ICs)."""
-        return np.r_[np.arange(self.ic_start), np.arange(self.ic_start + 12 * k, self.ic_start + 12 * (k + 1))]
+        """Indices of θ that flight k's predictions depend on (shared entries and its own)."""
+        return self.layout.flight_columns(k)
+
+    def residual_groups(self, k: int) -> np.ndarray:
+        """(n_res_k,) noise-group index (into :attr:`sigma_names`) of each of flight k's residuals."""
+        return self._residual_groups[k]
+
+    def flight_groups(self, k: int) -> np.ndarray:
+        """Indices of flight k's noise groups."""
+        return np.arange(self._groups[k][0].start, self._groups[k][-1].stop)
+
+    def subset(self, k: int, flight: FlightObservation | None = None) -> "Problem":
+        """The problem of flight k alone (optionally with its recording replaced, e.g. a window), with the
+        same model, settings and integration rate."""
+        return Problem(flights=[self.flights[k] if flight is None else flight], marker_body=self.marker_body,
+                       disc=self.disc, env=self.env, prior_name=self.prior_name, terms=self.terms,
+                       explanations=self.explanations, start_states=[self.start_states[k]],
+                       term_start=self.term_start, settings=self.settings, rates=[self.rates[k]],
+                       kernel_terms=self.kernel_terms)
+
+    def start_vector(self) -> np.ndarray:
+        """(dim,) prior means with the extension parameters at their starting values."""
+        x = self.prior_mean.copy()
+        x[self.layout.ext_slice] = self.term_start
+        return x
 
     # -- priors -----------------------------------------------------------------------------------------
     def _prior_arrays(self):
         cp = coefficient_prior(self.prior_name)
+        L = self.layout
         mean = np.zeros(self.dim)
         sd = np.zeros(self.dim)
         for i, n in enumerate(COEFFICIENT_NAMES):
             mean[i], sd[i] = cp.mean[n], cp.sd[n]
-        for j, p in enumerate(self.ext_parameters, start=self.n_coef):
+        for j, p in enumerate(L.ext_parameters, start=self.n_coef):
             mean[j], sd[j] = p.off_value, p.prior_sd
         ic_sd = np.repeat([IC_SD["position"], IC_SD["velocity"], IC_SD["attitude"], IC_SD["omega"]], 3)
         for k in range(self.n_flights):
-            mean[self.ic_slice(k)] = self.state_to_ic(self.start_states[k], k)
-            sd[self.ic_slice(k)] = ic_sd
+            mean[L.ic_slice(k)] = self.state_to_ic(self.start_states[k], k)
+            sd[L.ic_slice(k)] = ic_sd
+            own = L.own_slice(k)
+            mean[own] = [p.off_value for p in L.flight_parameters[k]]
+            sd[own] = [p.prior_sd for p in L.flight_parameters[k]]
         return mean, sd
 
     def log_prior(self, theta: np.ndarray) -> np.ndarray:
@@ -131,7 +212,7 @@ class Problem:
         return np.concatenate([ic[:, :6], q, ic[:, 9:12]], axis=1)
 
     def state_to_ic(self, state: np.ndarray, k: int) -> np.ndarray:
-        from ..physics.frames import quat_to_rotvec
+        """(13,) state of flight k → (12,) initial-condition parameters."""
         qr = self.q_ref[k] * np.array([1, -1, -1, -1])
         rel = quat_multiply(qr, state[6:10])
         return np.concatenate([state[:6], quat_to_rotvec(rel), state[10:13]])
@@ -142,81 +223,74 @@ class Problem:
         tr = self.simulate(theta, k, want_states=False)
         return tr.markers, tr.ok
 
-    def simulate(self, theta: np.ndarray, k: int, want_states: bool = True):
-        """The simulator's :class:`~bayes_disc.physics.simulator.Trajectories` of flight k for θ (B, dim)
-        on the flight's sample times (markers include the data explanations)."""
-        theta = np.atleast_2d(theta)
+    def _run(self, theta: np.ndarray, k: int, want_states: bool):
+        """The simulator's raw Trajectories of flight k on its sample times."""
         f = self.flights[k]
         states = self.ic_to_state(theta[:, self.ic_slice(k)], k)
-        ext = theta[:, self.n_coef: self.n_coef + self.n_phys] if self.n_phys else None
-        terms = self.terms
+        terms, ext = self.terms, (theta[:, self.layout.term_slice] if self.n_phys else None)
         if self.kernel_terms:
-            terms, ext = self.kernel_terms, self._kernel_extension(theta)
-        settings = self.settings
-        if self.rates:
-            settings = SimulatorSettings(method=settings.method, step_factor=settings.step_factor,
-                                         omega_cap=settings.omega_cap, speed_cap=settings.speed_cap,
-                                         fixed_rate=self.rates[k])
-        tr = simulate(states, theta[:, : self.n_coef], f.times, t0=f.times[0], disc=self.disc, env=self.env,
-                      marker_body=self.marker_body, terms=terms, extension=ext, settings=settings,
-                      want_states=want_states or bool(self.explanations))
+            terms, ext = self.kernel_terms, self.layout.kernel_extension(theta, self.kernel_terms)
+        settings = SimulatorSettings(method=self.settings.method, step_factor=self.settings.step_factor,
+                                     omega_cap=self.settings.omega_cap, speed_cap=self.settings.speed_cap,
+                                     fixed_rate=self.rates[k])
+        need = want_states or any(c.needs_states for c in self.channels[k])
+        return simulate(states, theta[:, : self.n_coef], f.times, t0=f.times[0], disc=self.disc, env=self.env,
+                        marker_body=self.marker_body, terms=terms, extension=ext, settings=settings,
+                        want_states=need)
+
+    def _extra(self, theta: np.ndarray, k: int) -> np.ndarray | None:
+        """Values (B, k) of flight k's explanation and own observation-model parameters."""
+        cols = np.r_[np.arange(self.layout.explanation_slice.start, self.layout.explanation_slice.stop),
+                     np.arange(self.layout.own_slice(k).start, self.layout.own_slice(k).stop)]
+        return theta[:, cols] if cols.size else None
+
+    def simulate(self, theta: np.ndarray, k: int, want_states: bool = True):
+        """The simulator's :class:`~bayes_disc.physics.simulator.Trajectories` of flight k for θ (B, dim)
+        on the flight's sample times (markers as the marker model predicts them, explanations included)."""
+        from dataclasses import replace
+        theta = np.atleast_2d(theta)
+        tr = self._run(theta, k, want_states)
         if self.explanations:
-            tr = replace(tr, markers=self._explained_markers(theta, tr.states, f.times))
-            if not want_states:
-                tr = replace(tr, states=None)
+            marker_model = next(c for c in self.channels[k] if isinstance(c, MarkerPositions))
+            tr = replace(tr, markers=marker_model.predict(tr, self._extra(theta, k)))
+        if not want_states and tr.states is not None:
+            tr = replace(tr, states=None)
         return tr
 
-    def _kernel_extension(self, theta: np.ndarray) -> np.ndarray:
-        """Parameters (B, n) of ``kernel_terms``: the model's own from θ, the others at their off values."""
-        own = {t.id: self.n_coef + sum(len(u.parameters) for u in self.terms[:i]) for i, t in enumerate(self.terms)}
-        missing = set(own) - {t.id for t in self.kernel_terms}
-        if missing:
-            raise ValueError(f"kernel_terms lacks the model's terms {sorted(missing)}")
-        cols = []
-        for t in self.kernel_terms:
-            for i, par in enumerate(t.parameters):
-                cols.append(theta[:, own[t.id] + i] if t.id in own else np.full(theta.shape[0], par.off_value))
-        return np.column_stack(cols)
-
-    def _explained_markers(self, theta: np.ndarray, states: np.ndarray, times: np.ndarray) -> np.ndarray:
-        """Markers (B, n, m, 3) with the data explanations' body and timing offsets applied."""
-        m = self.marker_body.shape[0]
-        body, timing = None, None
-        j = self.n_coef + self.n_phys
-        for e, params in zip(self.explanations, self._explanation_parameters()):
-            b, t = e.offsets(theta[:, j: j + len(params)], m)
-            body = b if b is not None else body
-            timing = t if t is not None else timing
-            j += len(params)
-        return predicted_markers(states, self.marker_body, body, timing, times)
-
     def residuals(self, theta: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Observed-point residuals (B, n_coords_k) [m] (predicted − measured) and ok flags."""
-        markers, ok = self.predict(theta, k)
-        r = markers[:, self._masks[k]] - self._obs[k][None]
-        return r.reshape(r.shape[0], -1), ok
+        """Residuals (B, n_res_k) (predicted − measured, every channel of flight k; markers in m) and ok
+        flags (B,)."""
+        theta = np.atleast_2d(theta)
+        tr = self._run(theta, k, want_states=False)
+        extra = self._extra(theta, k)
+        parts = [c.residuals(c.predict(tr, extra)) for c in self.channels[k]]
+        return (parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)), tr.ok
 
     def sum_squares(self, theta: np.ndarray) -> np.ndarray:
-        """S_f (B, n_flights) [m²]: summed squared marker residuals per flight; inf where a lane failed."""
+        """S_g (B, n_groups): summed squared residuals per noise group; inf where a lane failed."""
         theta = np.atleast_2d(theta)
-        out = np.empty((theta.shape[0], self.n_flights))
+        out = np.empty((theta.shape[0], self.n_groups))
         for k in range(self.n_flights):
-            r, ok = self.residuals(theta, k)
-            ss = np.sum(r * r, axis=1)
-            out[:, k] = np.where(ok & np.isfinite(ss), ss, np.inf)
+            tr = self._run(theta, k, want_states=False)
+            extra = self._extra(theta, k)
+            for c, g in zip(self.channels[k], self._groups[k]):
+                ss = c.sum_squares(c.residuals(c.predict(tr, extra)))
+                out[:, g] = np.where(tr.ok[:, None] & np.isfinite(ss), ss, np.inf)
         return out
 
     def log_likelihood_from_ss(self, ss: np.ndarray) -> np.ndarray:
-        """Σ_f log p(y_f | θ) with σ_f integrated out (see module docstring)."""
-        n = self.n_coords
-        const = gammaln(n / 2) - np.log(2.0) - 0.5 * n * np.log(np.pi)
-        return np.sum(const - 0.5 * n * np.log(ss), axis=1)
+        """Σ over flights and channels of log p(y | θ), every noise scale integrated out."""
+        total = 0.0
+        for ch, per in zip(self.channels, self._groups):
+            for c, g in zip(ch, per):
+                total = total + c.log_likelihood(ss[:, g])
+        return total
 
     def log_likelihood(self, theta: np.ndarray) -> np.ndarray:
         return self.log_likelihood_from_ss(self.sum_squares(theta))
 
     def log_prob_blobs(self, theta: np.ndarray) -> np.ndarray:
-        """Vectorised log-posterior for emcee with blobs: rows (log p(θ | y), S_1 … S_F), shape (B, 1 + F)."""
+        """Vectorised log-posterior for emcee with blobs: rows (log p(θ | y), S_1 … S_G), shape (B, 1 + G)."""
         theta = np.atleast_2d(theta)
         ss = self.sum_squares(theta)
         lp = self.log_prior(theta) + self.log_likelihood_from_ss(ss)
@@ -228,8 +302,12 @@ class Problem:
         return self.log_prob_blobs(theta)[:, 0]
 
     def draw_sigma(self, ss: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """σ_f [m] drawn from σ_f² | θ, y ~ S_f / χ²_{n_f} for sum-of-squares ss (..., n_flights)."""
-        return np.sqrt(ss / rng.chisquare(self.n_coords, size=ss.shape))
+        """Noise scales drawn from their exact conditionals given θ, for sums of squares ss (..., n_groups)."""
+        out = np.empty_like(ss)
+        for ch, per in zip(self.channels, self._groups):
+            for c, g in zip(ch, per):
+                out[..., g] = c.draw_noise(ss[..., g], rng)
+        return out
 
     def flight_rate(self, state: np.ndarray) -> float:
         """Integration rate for a flight: 1.25 × the fastest rate of its start (spin, nutation, aero)."""

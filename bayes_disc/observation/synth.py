@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..physics import (COEFFICIENT_NAMES, LITERATURE, TERMS, Coefficients, Disc, Environment, Trajectories, get_terms,
+from ..physics import (COEFFICIENT_NAMES, LITERATURE, Coefficients, Disc, Environment, Trajectories, get_terms,
                        literature_coefficients, simulate)
 from ..physics.frames import (angle_of_attack, attitude_from_yaw_pitch_roll, omega_body_from_pqr,
                               quat_to_matrix)
 from .config_io import ConfigError, Section, load_yaml
-from .explanations import EXPLANATIONS
+from .registry import DATA_EXPLANATION, PHYSICS_TERM, unit, split_extensions
 from .markers import FlightObservation, table_from_flights, write_marker_csv
 
 DEFAULT_MARKERS = {"0": [0.100, 0.000, -0.015], "1": [-0.0308, 0.0846, -0.015], "2": [-0.0707, -0.0778, -0.015]}
@@ -81,7 +81,7 @@ class SynthSpec:
     @property
     def terms(self):
         """Physics terms of the data (the ``physics`` entries that are not data explanations)."""
-        return get_terms([i for i in self.physics if i not in EXPLANATIONS])
+        return split_extensions(self.physics)[0]
 
     def extension(self) -> np.ndarray:
         vals = []
@@ -257,16 +257,12 @@ def read_physics(path, sec: Section, marker_ids=None) -> dict:
     if not isinstance(raw, dict):
         raise ConfigError(path, "physics", "must map term ids to their parameters")
     out = {}
+    kinds = (PHYSICS_TERM, DATA_EXPLANATION) if marker_ids is not None else (PHYSICS_TERM,)
     for tid, params in raw.items():
-        if marker_ids is not None and tid in EXPLANATIONS:
-            parameters = EXPLANATIONS[tid].parameters_for(tuple(marker_ids))
-        else:
-            try:
-                (term,) = get_terms([tid])
-            except KeyError:
-                known = sorted(TERMS) + (sorted(EXPLANATIONS) if marker_ids is not None else [])
-                raise ConfigError(path, f"physics.{tid}", f"unknown term {tid!r}; known: {known}") from None
-            parameters = term.parameters
+        try:
+            parameters = unit(str(tid), kinds).parameters(tuple(marker_ids or ()))
+        except KeyError as e:
+            raise ConfigError(path, f"physics.{tid}", e.args[0]) from None
         s = Section(path, params, f"physics.{tid}")
         out[tid] = {p.name: s.number(p.name, p.off_value) for p in parameters}
         s.finish()

@@ -13,6 +13,12 @@ COEFFICIENT_NAMES: tuple[str, ...] = (
     "CL0", "CLa", "CD0", "CDa", "CM0", "CMa", "CMq", "CRr", "CRp", "CNr",
 )
 
+#: Units of the coefficients (α in rad, rates p, q, r in rad/s; "1" = dimensionless).
+COEFFICIENT_UNITS: dict[str, str] = {
+    "CL0": "1", "CLa": "1/rad", "CD0": "1", "CDa": "1/rad²", "CM0": "1", "CMa": "1/rad",
+    "CMq": "s/rad", "CRr": "s/rad", "CRp": "s/rad", "CNr": "s/rad",
+}
+
 
 @dataclass(frozen=True)
 class Disc:

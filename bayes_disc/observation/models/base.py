@@ -1,0 +1,117 @@
+"""The contract every observation model fulfils (like ``scipy.integrate.OdeSolver``).
+
+An observation model holds one flight's recordings of one kind and answers, for a batch of B parameter
+vectors whose simulated trajectories are given:
+
+* ``predict(trajectories, extra)``: the noise-free prediction of the recordings;
+* ``residuals(prediction)``: predicted − measured on the observed entries, (B, n_res) in the data's unit;
+* ``group_index`` (n_res,): the noise group of each residual (entries sharing one noise scale σ_g);
+* ``log_likelihood(ss)``: log p(y | θ) from the per-group sums of squared residuals S_g (B, n_groups),
+  with each σ_g integrated out under its Jeffreys prior p(σ_g) ∝ 1/σ_g (:func:`gaussian_marginal_loglik`);
+* ``draw_noise(ss, rng)``: σ_g drawn exactly from σ_g² | θ, y ~ S_g / χ²_{n_g}.
+
+It also names its noise groups (``noise_names``, the public names of the σ_g), the data explanations it
+applies (``explanation_ids``: their parameters are shared by every flight and sit in the parameter
+layout's extension block) and its own per-flight parameters (``parameters``: names, units, off values and
+prior scales; none for markers). ``needs_states`` tells the simulator whether full states are required.
+"""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import ClassVar
+
+import numpy as np
+from scipy.special import gammaln
+
+from ...physics import TermParameter
+
+
+def gaussian_marginal_loglik(ss: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """log ∫ N(y | m, σ² I) dσ/σ = log Γ(n/2) − log 2 − (n/2) log(π S), summed over groups.
+
+    Parameters
+    ----------
+    ss : (B, G) array
+        Sums of squared residuals S_g per noise group [unit²].
+    n : (G,) array
+        Number of residuals in each group.
+
+    Returns
+    -------
+    (B,) array
+        Σ_g log p(y_g | θ) with σ_g integrated out.
+    """
+    n = np.asarray(n, float)
+    const = gammaln(n / 2) - np.log(2.0) - 0.5 * n * np.log(np.pi)
+    return np.sum(const - 0.5 * n * np.log(ss), axis=1)
+
+
+class ObservationModel(ABC):
+    """One flight's recordings of one kind, and how the flight model predicts them (module docstring)."""
+
+    #: registry id (``observation.registry``)
+    id: ClassVar[str]
+    #: one-line title
+    title: ClassVar[str]
+    #: the measurement equations, symbols and units
+    equations: ClassVar[str]
+
+    flight: str
+    times: np.ndarray
+
+    @property
+    def parameters(self) -> tuple[TermParameter, ...]:
+        """This flight's own parameters of the model (appended to the flight's initial conditions)."""
+        return ()
+
+    @property
+    def explanation_ids(self) -> tuple[str, ...]:
+        """Ids of the data explanations this model applies (their parameters are shared by all flights)."""
+        return ()
+
+    @property
+    def needs_states(self) -> bool:
+        return True
+
+    @property
+    @abstractmethod
+    def noise_names(self) -> tuple[str, ...]:
+        """Public names of the noise scales σ_g, one per group."""
+
+    @property
+    @abstractmethod
+    def group_index(self) -> np.ndarray:
+        """(n_res,) noise group of each residual."""
+
+    @property
+    def group_sizes(self) -> np.ndarray:
+        """(n_groups,) number of residuals per noise group."""
+        return np.bincount(self.group_index, minlength=len(self.noise_names))
+
+    @abstractmethod
+    def predict(self, trajectories, extra: np.ndarray | None) -> np.ndarray:
+        """Noise-free prediction from :class:`~bayes_disc.physics.Trajectories` (batch B) and the values
+        (B, k) of the explanation and own parameters (``None`` when there are none)."""
+
+    @abstractmethod
+    def residuals(self, prediction: np.ndarray) -> np.ndarray:
+        """(B, n_res) predicted − measured on the observed entries."""
+
+    def sum_squares(self, residuals: np.ndarray) -> np.ndarray:
+        """(B, n_groups) sums of squared residuals per noise group."""
+        G = len(self.noise_names)
+        if G == 1:
+            return np.sum(residuals * residuals, axis=1)[:, None]
+        out = np.zeros((residuals.shape[0], G))
+        for g in range(G):
+            r = residuals[:, self.group_index == g]
+            out[:, g] = np.sum(r * r, axis=1)
+        return out
+
+    def log_likelihood(self, ss: np.ndarray) -> np.ndarray:
+        """(B,) log p(y | θ) with every σ_g integrated out (Jeffreys prior), from ss (B, n_groups)."""
+        return gaussian_marginal_loglik(ss, self.group_sizes)
+
+    def draw_noise(self, ss: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """σ_g drawn from σ_g² | θ, y ~ S_g / χ²_{n_g}; ss (..., n_groups) → (..., n_groups)."""
+        return np.sqrt(ss / rng.chisquare(self.group_sizes, size=ss.shape))
