@@ -132,18 +132,37 @@ def test_the_checks_catch_an_undocumented_key_and_a_wrong_default(tmp_path):
     assert default_matches("`vern7`", "vern7") and not default_matches("`rk4`", "vern7")
 
 
-def test_documentation_links_resolve():
+def heading_anchors(text: str) -> set:
+    """GitHub's anchors of the Markdown headings: lower case, punctuation dropped, spaces → hyphens."""
+    return {re.sub(r"[^\w\- ]", "", h.strip().lower()).replace(" ", "-")
+            for h in re.findall(r"^#+ (.+)$", text, flags=re.M)}
+
+
+def broken_links(page: Path) -> list:
+    """Relative links of a Markdown page whose file or heading anchor does not exist."""
+    broken = []
+    for target in re.findall(r"\]\(([^)\s]+)\)", page.read_text()):
+        if re.match(r"[a-z]+://", target):
+            continue
+        name, _, anchor = target.partition("#")
+        file = (page.parent / name).resolve() if name else page
+        if not file.exists():
+            broken.append(target)
+        elif anchor and file.suffix == ".md" and anchor not in heading_anchors(file.read_text()):
+            broken.append(target)
+    return broken
+
+
+def test_documentation_links_resolve(tmp_path):
     pages = sorted(DOCS.glob("*.md")) + [REPO / "README.md", REPO / "bayes_disc" / "video" / "README.md",
                                          REPO / "runs" / "video_demo" / "README.md"]
-    broken = []
-    for page in pages:
-        for target in re.findall(r"\]\(([^)\s]+)\)", page.read_text()):
-            if re.match(r"[a-z]+://", target) or target.startswith("#"):
-                continue
-            file = (page.parent / target.split("#")[0]).resolve()
-            if not file.exists():
-                broken.append(f"{page.relative_to(REPO)} → {target}")
+    broken = {str(p.relative_to(REPO)): b for p in pages if (b := broken_links(p))}
     assert not broken, broken
+    # negative control: a missing file and a missing heading are both caught
+    page = tmp_path / "page.md"
+    page.write_text("# Flight model (Hummel & Hubbard 2002)\n[a](#flight-model-hummel--hubbard-2002) [b](nope.md) "
+                    "[c](#no-such-heading) [d](page.md#flight-model-hummel--hubbard-2002)\n")
+    assert broken_links(page) == ["nope.md", "#no-such-heading"]
 
 
 def test_help_texts_speak_to_users():
