@@ -61,31 +61,46 @@ def _cmd_diagnose(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="bayes-disc", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="bayes-disc",
+                                     description="Estimate flying-disc aerodynamic coefficients from tracked "
+                                                 "flights. Documentation: docs/index.md in the repository.")
     parser.add_argument("--version", action="version", version=f"bayes-disc {__version__}")
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("simulate", help="simulate a case (reference JSON format) to a marker CSV")
-    p.add_argument("case", help="CASE.json in the format of shared/reference/NAME.json")
-    p.add_argument("-o", "--output", required=True, help="output marker CSV (SPEC §4)")
+    p.add_argument("case", help="CASE.json: disc constants, coefficients, marker body positions, initial state, "
+                                "sample rate, duration (format: docs/data-formats.md)")
+    p.add_argument("-o", "--output", required=True, help="marker CSV to write (format: docs/data-formats.md)")
     p.set_defaults(func=_cmd_simulate)
     p = sub.add_parser("synth", help="make synthetic flights from a SYNTH.yaml description")
     p.add_argument("config", help="SYNTH.yaml")
     p.set_defaults(func=_cmd_synth)
-    p = sub.add_parser("sample", help="least squares + emcee posterior over coefficients and initial conditions")
-    p.add_argument("config", help="CONFIG.yaml (SPEC §5)")
+    p = sub.add_parser("sample", help="least squares + emcee posterior over coefficients and initial conditions",
+                       description="The main job: joint least squares, then emcee ensembles, over the ten "
+                                   "coefficients and every flight's initial conditions. Writes summary.json, "
+                                   "posterior.nc, least_squares.json, profiles.json, run_info.json and chains/ in the "
+                                   "output folder, and reports/<name>.html (docs/outputs.md).")
+    p.add_argument("config", help="run configuration YAML (keys: docs/configuration.md)")
     p.add_argument("--resume", action="store_true", help="continue an interrupted run from its chain files")
     p.add_argument("--output", help="override the config's output folder")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--strict", action="store_true", help="exit 3 if the cap is reached before convergence")
     p.set_defaults(func=_cmd_sample)
-    p = sub.add_parser("identifiability", help="which coefficients the flights determine, and the next throw")
-    p.add_argument("config", help="CONFIG.yaml (SPEC §5)")
+    p = sub.add_parser("identifiability", help="which coefficients the flights determine, and the next throw",
+                       description="Least squares and Fisher information (no MCMC): a verdict per coefficient "
+                                   "(identified, weak, unidentified) with its reason, the flight envelope, and the "
+                                   "most informative next throw. Writes identifiability.json in the output folder "
+                                   "(docs/outputs.md).")
+    p.add_argument("config", help="run configuration YAML (keys: docs/configuration.md)")
     p.add_argument("--profiles", action="store_true", help="also profile the likelihood of every coefficient")
     p.add_argument("--no-design", action="store_true", help="skip the ranking of candidate throws")
     p.add_argument("--output", help="override the config's output folder")
     p.set_defaults(func=_cmd_identifiability)
-    p = sub.add_parser("diagnose", help="locate a model–data mismatch, name the missing physics, refit")
-    p.add_argument("config", help="CONFIG.yaml (SPEC §5)")
+    p = sub.add_parser("diagnose", help="locate a model–data mismatch, name the missing physics, refit",
+                       description="Is the model missing physics? Ranks candidate terms by ΔBIC, accepts one only "
+                                   "when the residuals turn white, and resamples with it. Writes diagnosis.json, "
+                                   "diagnosis_residuals.npz and diagnosis_refit/ in the output folder "
+                                   "(docs/outputs.md).")
+    p.add_argument("config", help="run configuration YAML (keys: docs/configuration.md)")
     p.add_argument("--no-sample", action="store_true",
                    help="least-squares estimates only (no emcee resampling with the accepted terms)")
     p.add_argument("--processes", type=_positive_int, default=2, help="parallel candidate fits (default 2)")

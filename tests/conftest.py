@@ -1,3 +1,4 @@
+import os
 from pathlib import Path
 
 import numpy as np
@@ -6,12 +7,68 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
 REFERENCE_DIR = SHARED / "reference"
+REFERENCE_MISSING = "../shared/reference not found beside the checkout: CI provides it"
+
+
+def in_ci(environ=None) -> bool:
+    """True when the environment says this is a CI run (``CI=true``, as CI services and ``.ci/run`` set it)."""
+    return (os.environ if environ is None else environ).get("CI", "").strip().lower() in ("true", "1", "yes")
+
+
+def require_outside_input(present: bool, reason: str, environ=None) -> None:
+    """Skip the calling test when an input that lives outside the repository is absent, except in CI.
+
+    Parameters
+    ----------
+    present : bool
+        Whether the input (a folder beside the checkout, a system program) is there.
+    reason : str
+        Why it may be absent on a user's machine; the skip (or CI failure) message.
+    environ : mapping, optional
+        Environment to read ``CI`` from (default ``os.environ``).
+
+    Raises
+    ------
+    pytest.skip.Exception
+        Absent on a user's machine: the test is skipped with ``reason``.
+    pytest.fail.Exception
+        Absent in CI (``CI=true``): CI must run the test, so this is a failure.
+    """
+    if present:
+        return
+    if in_ci(environ):
+        pytest.fail(f"{reason}; CI=true, so this is an error, not a skip")
+    pytest.skip(reason)
+
+
+def locate_reference(path: Path = REFERENCE_DIR, environ=None) -> Path:
+    """The reference-trajectory folder ``../shared/reference`` (skips outside CI when absent).
+
+    Parameters
+    ----------
+    path : Path
+        Where the folder is expected (default: ``shared/reference`` beside the checkout).
+    environ : mapping, optional
+        Environment to read ``CI`` from (default ``os.environ``).
+
+    Returns
+    -------
+    Path
+        ``path``, when it is a folder.
+    """
+    require_outside_input(Path(path).is_dir(), REFERENCE_MISSING, environ)
+    return Path(path)
+
+
+def reference_case_names(path: Path = REFERENCE_DIR) -> list:
+    """Stems of the ``NAME.json`` cases in ``path`` (empty when the folder is absent)."""
+    return sorted(p.stem for p in Path(path).glob("*.json")) if Path(path).is_dir() else []
 
 
 @pytest.fixture(scope="session")
 def reference_dir() -> Path:
-    assert REFERENCE_DIR.is_dir(), f"SPEC §3 reference trajectories expected at {REFERENCE_DIR} (../shared/reference)"
-    return REFERENCE_DIR
+    """The reference trajectories (``../shared/reference``); skipped with the reason when absent, failed in CI."""
+    return locate_reference()
 
 
 @pytest.fixture

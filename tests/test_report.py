@@ -21,6 +21,8 @@ from bayes_disc.report.html import render_document
 from bayes_disc.report.run import build_sections
 from bayes_disc.report.windtunnel import load_wind_tunnel
 
+from conftest import require_outside_input
+
 CHROMIUM = "/usr/bin/chromium"
 FIGURES = ("corner", "trace", "ranks", "residuals", "angle_of_attack", "trajectories", "posterior_predictive",
            "force_curves", "posterior_correlation")
@@ -254,7 +256,8 @@ def test_wind_tunnel_table_is_packaged():
 
 # ---------------------------------------------------------------------------------------------- browser
 def _chromium(tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
-    assert Path(CHROMIUM).is_file(), f"{CHROMIUM} missing: install Debian's chromium (CI: apt-get install chromium)"
+    require_outside_input(Path(CHROMIUM).is_file(),
+                          f"{CHROMIUM} not installed (Debian's chromium): CI installs it, see .ci/run")
     profile = tmp_path / f"profile{len(list(tmp_path.glob('profile*')))}"
     profile.mkdir()
     cmd = [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",

@@ -141,7 +141,7 @@ def read_marker_csv(path, marker_ids=None) -> MarkerTable:
                 raise MarkerFileError(path, line, "some but not all coordinates are NaN")
             if not any(nan) and max(abs(v) for v in xyz) > MAX_COORDINATE_M:
                 raise MarkerFileError(path, line, f"coordinate {max(abs(v) for v in xyz):g} m: looks like "
-                                      "millimetres; SPEC §4 wants metres")
+                                      "millimetres; marker files are in metres (docs/data-formats.md)")
             for c in extras:
                 text = row[idx[c]].strip()
                 try:
@@ -188,7 +188,7 @@ def validate_table(table: MarkerTable, path="<table>") -> None:
         spacing = _median_spacing(table.t[rows], table.marker[rows], table.xyz[rows])
         if spacing is not None and spacing > MAX_MARKER_SPACING_M:
             raise MarkerFileError(path, int(lines[rows[0]]), f"flight {name!r}: markers are {spacing:.3g} apart "
-                                  "(median): looks like millimetres; SPEC §4 wants metres")
+                                  "(median): looks like millimetres; marker files are in metres (docs/data-formats.md)")
 
 
 def _median_spacing(t, marker, xyz) -> float | None:

@@ -85,7 +85,7 @@ def run_summary(ctx) -> Section:
                                    f"{conv['ensembles']} ensembles = "
                                    f"{conv['kept_steps'] * conv['walkers_per_ensemble'] * conv['ensembles']}"),
         ("prior", f"{s['prior']['name']}: {s['prior']['description']}"),
-        ("physics terms beyond SPEC §2", ", ".join(s.get("physics_terms") or []) or "none"),
+        ("physics terms beyond the ten-coefficient model", ", ".join(s.get("physics_terms") or []) or "none"),
         ("truth file", "yes (synthetic data; truths overlaid)" if ctx.truth_coefficients else "no"),
         ("wall time of the run", f"{info['wall_time_s']:.0f} s" if "wall_time_s" in info else "–"),
         ("of which sampling", f"{info['sampling_wall_time_s']:.0f} s" if "sampling_wall_time_s" in info else "–"),
@@ -180,8 +180,8 @@ def coefficient_table(ctx) -> Section:
         frows.append(row)
     flight_html = table(["parameter"] + flights, frows, "num")
     html = (coef_html + "<p class=note>✗ marks a published (or true) value outside the posterior 95 % interval. "
-            "Rate coefficients (CMq, CRr, CRp, CNr) are per rad/s, as in SPEC §2; Potts &amp; Crowther give "
-            "no rate terms.</p><h3>Noise scale and initial conditions per flight</h3>" + flight_html
+            "Rate coefficients (CMq, CRr, CRp, CNr) are per rad/s, as in Hummel &amp; Hubbard (2002); Potts "
+            "&amp; Crowther give no rate terms.</p><h3>Noise scale and initial conditions per flight</h3>" + flight_html
             + "<p class=note>Median (5 % … 95 %). Initial state at the flight's first sample: position, "
               "velocity, attitude as a rotation vector ϑ relative to the data-derived start attitude, and "
               "body-frame angular velocity.</p>")

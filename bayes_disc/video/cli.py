@@ -41,7 +41,8 @@ def _render(args) -> int:
 
 def register(subparsers) -> None:
     """Add the ``track`` and ``render`` subcommands to an argparse subparsers object."""
-    p = subparsers.add_parser("track", help="footage (or DLTdv/Argus points) + calibration → marker tracks (SPEC §4)",
+    p = subparsers.add_parser("track", help="footage (or DLTdv/Argus points) + calibration → marker CSV "
+                                            "(docs/data-formats.md)",
                               description="Detect, label and triangulate disc markers from multi-camera footage "
                                           "(see bayes_disc/video/README.md for TRACK.yaml).")
     p.add_argument("config", help="TRACK.yaml")
