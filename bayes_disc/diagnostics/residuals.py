@@ -28,7 +28,8 @@ import numpy as np
 from scipy.stats import chi2
 
 from ..inference.model import Problem
-from ..physics.frames import angle_of_attack, quat_to_matrix
+from ..physics.conditions import flight_conditions
+from ..physics.frames import quat_to_matrix
 
 DIRECTIONS = ("along", "lateral", "normal", "d1", "d2", "d3")
 ROTATIONS = ("roll", "pitch", "spin_phase")
@@ -81,6 +82,11 @@ def marker_series(diff: np.ndarray, states: np.ndarray, markers: np.ndarray, see
     return r, proj, rot, rot_se
 
 
+def _term_parameters(problem: Problem, theta: np.ndarray) -> np.ndarray:
+    """The model's physics-term parameters in θ (they follow the ten coefficients)."""
+    return theta[..., problem.n_coef: problem.n_coef + sum(len(t.parameters) for t in problem.terms)]
+
+
 def flight_residuals(problem: Problem, theta: np.ndarray) -> list[FlightResiduals]:
     out = []
     for k, f in enumerate(problem.flights):
@@ -89,8 +95,8 @@ def flight_residuals(problem: Problem, theta: np.ndarray) -> list[FlightResidual
         seen = f.observed                                          # (n, m)
         n_seen = np.sum(seen, axis=1)
         r, proj, rot, rot_se = marker_series(f.positions - pred, st, pred, seen)
-        v = st[:, 3:6]
-        cov = {"alpha": angle_of_attack(v, st[:, 6:10]), "speed": np.linalg.norm(v, axis=1), "spin": st[:, 12],
+        air = flight_conditions(st, f.times, problem.terms, _term_parameters(problem, theta))
+        cov = {"alpha": air.alpha[0], "speed": air.speed[0], "spin": st[:, 12],
                "height": st[:, 2], "time": f.times - f.times[0]}
         unit_se = {name: 1.0 / np.sqrt(np.maximum(n_seen, 1)) for name in DIRECTIONS} | rot_se
         out.append(FlightResiduals(f.name, f.times, r, n_seen, proj, cov, rot, unit_se))

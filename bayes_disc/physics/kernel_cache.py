@@ -59,6 +59,11 @@ def kernel_key(source: KernelSource) -> str:
     Returns
     -------
     str
+
+    Raises
+    ------
+    OSError
+        If the source of a module the kernel imports is not available.
     """
     from .. import __version__
     h = hashlib.sha256()
@@ -68,7 +73,7 @@ def kernel_key(source: KernelSource) -> str:
         if mod is not None:
             modules[mod.__name__] = mod
     parts = [source.text, numba.__version__, np.__version__, sys.version, platform.machine(), __version__]
-    parts += [f"{name}\n{inspect.getsource(mod)}" for name, mod in sorted(modules.items())]
+    parts += [f"{name}\n{inspect.getsource(mod)}" for name, mod in sorted(modules.items())]   # OSError: no source
     for part in parts:
         h.update(part.encode())
         h.update(b"\0")
@@ -166,7 +171,12 @@ def load_kernel(cached: KernelSource, uncached: KernelSource):
                       "function): its kernel is compiled in memory and not cached on disk", RuntimeWarning,
                       stacklevel=3)
         return compile_in_memory(uncached)
-    key = kernel_key(cached)
+    try:
+        key = kernel_key(cached)
+    except (OSError, TypeError) as exc:
+        warnings.warn(f"the source of a physics term's hooks is not available ({exc}): its kernel is compiled in "
+                      "memory and not cached on disk", RuntimeWarning, stacklevel=3)
+        return compile_in_memory(uncached)
     folder = cache_root() / "kernels"
     path = folder / f"bd_kernel_{key}.py"
     try:
