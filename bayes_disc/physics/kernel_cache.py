@@ -10,7 +10,8 @@ Cache root: ``$BAYES_DISC_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/bayes-disc`
 ``~/.cache/bayes-disc``. Files are written atomically (temporary file, then a link that never replaces
 an existing file), so concurrent processes are safe. If the directory cannot be written, or a term's
 hooks cannot be imported by name, the kernel is compiled in memory as before, with a warning: the
-results are the same, only the compile time is not saved.
+results are the same, only the compile time is not saved. Kernels of older versions are never read
+again (their key differs) and not deleted either: removing the directory is always safe.
 """
 from __future__ import annotations
 

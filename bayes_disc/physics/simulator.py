@@ -22,7 +22,7 @@ from .terms import Term
 class SimulatorSettings:
     """Integrator settings.
 
-    method: Runge–Kutta tableau of :data:`.kernel.TABLEAUX` (default ``vern7``: Verner's 9-stage 7th
+    method: Runge–Kutta tableau of :data:`.tableaux.TABLEAUX` (default ``vern7``: Verner's 9-stage 7th
     order; also ``dop853`` 12-stage 8th order, ``rk6`` Butcher 7-stage 6th order, ``rk4``); step_factor
     c: the substep is h ≤ c/ω_c (see :mod:`.kernel`), None for the method's default; omega_cap [rad/s]:
     lanes faster than this are flagged; speed_cap [m/s]: lanes faster than this are flagged; fixed_rate
