@@ -155,3 +155,60 @@ def test_wild_parameters_return_flags_not_nan():
             assert np.all(np.isnan(tr.markers[b])), f"lane {b} failed but not NaN"
     solo = simulate(good, HUMMEL, t, marker_body=MARKERS)
     assert np.abs(solo.markers[0] - tr.markers[0]).max() < 1e-7
+
+
+def test_flight_conditions_match_the_model_with_and_without_wind():
+    """α, speed and p, q, r of physics.conditions equal those of the equations' forces (wind included)."""
+    from bayes_disc.physics.conditions import flight_conditions
+    from bayes_disc.physics.equations import aerodynamic_loads
+    from bayes_disc.physics.frames import angle_of_attack
+    from bayes_disc.physics.terms import TERMS
+    rng = np.random.default_rng(5)
+    times = np.linspace(0.0, 1.0, 6)
+    states = np.stack([_state(speed=s) for s in (10.0, 13.0, 16.0, 12.0, 14.0, 11.0)])
+    states[:, 6:10] = states[:, 6:10] + rng.normal(0, 0.05, (6, 4))
+    coef, disc, env = literature_coefficients("hummel2002"), Disc(), Environment()
+    wind = np.array([-3.0, 2.0, 0.5])
+    terms = (TERMS["side_force"], TERMS["wind"])
+    ext = np.concatenate([[0.1], wind])
+    cond = flight_conditions(states[None], times, terms, ext)
+    no_wind = flight_conditions(states, times)
+    for i, y in enumerate(states):
+        loads = aerodynamic_loads(y, coef, disc, env, terms, ext, times[i])
+        assert cond.alpha[0, i] == pytest.approx(loads.alpha, abs=1e-13)
+        assert cond.speed[0, i] == pytest.approx(loads.speed, rel=1e-13)
+        np.testing.assert_allclose(cond.pqr[0, i], loads.pqr, atol=1e-12)
+    # the wind matters here, and without it the old definition is recovered
+    assert np.max(np.abs(cond.alpha - no_wind.alpha)) > 0.02
+    np.testing.assert_allclose(no_wind.alpha[0], angle_of_attack(states[:, 3:6], states[:, 6:10]), atol=1e-14)
+    np.testing.assert_allclose(cond.alpha[0], angle_of_attack(states[:, 3:6], states[:, 6:10], wind), atol=1e-14)
+
+
+def test_kernel_rhs_template_equals_the_readable_equations():
+    """physics.rhs.rhs (the kernel's right-hand side, run here as plain Python) = equations.state_derivative."""
+    from bayes_disc.physics import rhs
+    from bayes_disc.physics.equations import state_derivative
+    coef, disc, env = literature_coefficients("hummel2002"), Disc(), Environment()
+    m, Ia, Id, d, A, rho = disc.mass, disc.Ia, disc.Id, disc.diameter, disc.area, env.rho
+    scale = np.r_[[0.5 * rho * A / m] * 4, [0.5 * rho * A * d / Id] * 5, 0.5 * rho * A * d / Ia]
+    cf = tuple(coef.as_array() * scale)
+    kd = (env.g, (Id - Ia) / Id, 1.0 / m, 1.0 / Id, 1.0 / Ia, m, A, d, rho)
+    for y in (_state(), _state(speed=9.0, pitch=0.5, roll=-0.3, pqr=(-4.0, 6.0, 80.0))):
+        got = np.array(rhs.rhs(0.0, tuple(y), cf, np.zeros((1, 1)), 0, kd))
+        want = state_derivative(0.0, y, coef, disc, env)
+        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
+
+
+def test_one_extension_vector_serves_a_whole_batch():
+    """extension (n_ext,) or None (off values) applies to every lane of a batch (SPEC: (B, n) or (n,))."""
+    terms = get_terms(["wind", "side_force"])
+    y0 = np.stack([_state(speed=s) for s in (11.0, 13.0, 15.0)])
+    t = np.arange(0.0, 0.3, 1 / 120)
+    ext = np.array([1.0, -2.0, 0.3, 0.05])
+    batch = simulate(y0, HUMMEL, t, terms=terms, extension=ext)
+    off = simulate(y0, HUMMEL, t, terms=terms)
+    for b in range(3):
+        np.testing.assert_array_equal(batch.states[b], simulate(y0[b], HUMMEL, t, terms=terms, extension=ext).states[0])
+        np.testing.assert_array_equal(off.states[b], simulate(y0[b], HUMMEL, t, terms=terms).states[0])
+        np.testing.assert_allclose(off.states[b], simulate(y0[b], HUMMEL, t).states[0], rtol=0, atol=1e-12)
+    assert np.abs(batch.states[:, -1, :3] - off.states[:, -1, :3]).max() > 1e-3    # the parameters act

@@ -37,7 +37,6 @@ from ..inference.model import Problem
 from ..observation.markers import FlightObservation
 from ..observation.synth import LaunchSpec
 from ..physics import LITERATURE
-from ..physics.frames import angle_of_attack
 
 #: offset–slope pairs whose separation needs a spread of angle of attack
 ALPHA_PAIRS = (("CL0", "CLa"), ("CD0", "CDa"), ("CM0", "CMa"))
@@ -74,8 +73,8 @@ def flight_envelopes(problem: Problem, theta: np.ndarray) -> list[FlightEnvelope
     for k, f in enumerate(problem.flights):
         tr = problem.simulate(theta[None], k, want_states=True)
         st = tr.states[0]
-        alpha = np.degrees(angle_of_attack(st[:, 3:6], st[:, 6:10]))
-        out.append(FlightEnvelope(f.name, alpha, np.linalg.norm(st[:, 3:6], axis=1), st[:, 12]))
+        air = problem.conditions(st, theta, k)
+        out.append(FlightEnvelope(f.name, np.degrees(air.alpha[0]), air.speed[0], st[:, 12]))
     return out
 
 

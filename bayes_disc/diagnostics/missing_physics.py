@@ -23,13 +23,13 @@ window where it is strongest.
 """
 from __future__ import annotations
 
-import multiprocessing as mp
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from scipy.optimize import least_squares
 
+from ..physics.parallel import mp_context
 from ..inference.leastsq import LeastSquaresResult, refine_least_squares, whitened_jacobian, whitened_residuals
 from ..inference.model import Problem
 from ..observation.registry import MODEL_EXTENSIONS
@@ -164,11 +164,12 @@ def fit_candidates(base: ModelFit, build, ids, processes: int = 1, max_nfev: int
         p.kernel_terms = tuple(TERMS.values())      # one compiled kernel for every candidate
     tasks = [(p, candidate_starts(base, p), base.ls.sigma, max_nfev) for p in problems.values()]
     if processes > 1 and len(tasks) > 1:
-        # compile the shared kernel (both batch widths) here, once, so the forked workers inherit it
+        # compile the shared kernel (both batch widths) here, once: forked workers inherit it, spawned ones
+        # load it from the disk cache (physics.kernel_cache)
         p, x0 = next(iter(problems.values())), tasks[0][1][0]
         p.residuals(x0[None], 0)
         p.residuals(np.repeat(x0[None], 2 * p.flight_columns(0).size, axis=0), 0)
-        with mp.get_context("fork").Pool(min(processes, len(tasks))) as pool:
+        with mp_context().Pool(min(processes, len(tasks))) as pool:
             results = pool.map(_fit_task, tasks, chunksize=1)
     else:
         results = [_fit_task(t) for t in tasks]
@@ -282,7 +283,8 @@ def term_signature(fit: ModelFit, names) -> list[dict]:
         on_tr, off_tr = p.simulate(fit.ls.theta[None], k), p.simulate(off[None], k)
         st, pred = on_tr.states[0], on_tr.markers[0]
         diff = pred - off_tr.markers[0]
-        _, proj, rot, _ = marker_series(diff, st, pred, np.ones(diff.shape[:2], bool))
+        _, proj, rot, _ = marker_series(diff, st, pred, np.ones(diff.shape[:2], bool),
+                                        p.conditions(st, fit.ls.theta, k))
         dt = np.diff(f.times).mean()
         accel = {n: np.gradient(np.gradient(x, dt), dt) for n, x in proj.items()}
         out.append({"times": f.times - f.times[0], "series": proj | rot, "accel": accel,

@@ -28,7 +28,6 @@ import numpy as np
 from scipy.stats import chi2
 
 from ..inference.model import Problem
-from ..physics.frames import angle_of_attack, quat_to_matrix
 
 DIRECTIONS = ("along", "lateral", "normal", "d1", "d2", "d3")
 ROTATIONS = ("roll", "pitch", "spin_phase")
@@ -54,28 +53,28 @@ class FlightResiduals:
     unit_se: dict        # {series: (n,)} standard error of each series per unit marker noise σ [1 or rad/m]
 
 
-def flight_axes(states: np.ndarray) -> dict:
-    """Unit vectors (n, 3) of the flight-path frame (along, lateral, normal) and the D frame (d1, d2, d3)
-    along states (n, 13)."""
+def flight_axes(states: np.ndarray, conditions) -> dict:
+    """Unit vectors (n, 3) of the flight-path frame (along, lateral, normal: ground-relative velocity) and
+    the D frame (d1, d2, d3: air-relative, from ``conditions``, the
+    :class:`~bayes_disc.physics.FlightConditions` of the same states) along states (n, 13)."""
     v = states[:, 3:6]
     t_hat = v / np.linalg.norm(v, axis=1, keepdims=True)
     s = np.cross(np.array([0.0, 0.0, 1.0]), t_hat)
     s_hat = s / np.linalg.norm(s, axis=1, keepdims=True)
     n_hat = np.cross(t_hat, s_hat)
-    d3 = quat_to_matrix(states[:, 6:10])[:, :, 2]                # b3 (world), D frame of SPEC §1
-    v_perp = v - np.einsum("ni,ni->n", v, d3)[:, None] * d3
-    d1 = v_perp / np.linalg.norm(v_perp, axis=1, keepdims=True)
-    return {"along": t_hat, "lateral": s_hat, "normal": n_hat, "d1": d1, "d2": np.cross(d3, d1), "d3": d3}
+    return {"along": t_hat, "lateral": s_hat, "normal": n_hat,
+            "d1": conditions.d1[0], "d2": conditions.d2[0], "d3": conditions.d3[0]}
 
 
-def marker_series(diff: np.ndarray, states: np.ndarray, markers: np.ndarray, seen: np.ndarray):
+def marker_series(diff: np.ndarray, states: np.ndarray, markers: np.ndarray, seen: np.ndarray, conditions):
     """Series of a per-marker difference ``diff`` (n, m, 3) [m] (NaN-free where ``seen``): the marker mean
     r̄ (n, 3), its projections {direction: (n,)}, the attitude angles {rotation: (n,)} [rad] and their unit
-    standard errors, given the predicted states (n, 13) and markers (n, m, 3)."""
+    standard errors, given the predicted states (n, 13), markers (n, m, 3) and flight conditions
+    (:meth:`bayes_disc.inference.model.Problem.conditions` of the states)."""
     n_seen = np.sum(seen, axis=1)
     total = np.sum(np.where(seen[..., None], diff, 0.0), axis=1)
     r = np.where(n_seen[:, None] > 0, total / np.maximum(n_seen, 1)[:, None], np.nan)   # (n, 3)
-    axes = flight_axes(states)
+    axes = flight_axes(states, conditions)
     proj = {name: np.einsum("ni,ni->n", r, axis) for name, axis in axes.items()}
     rot, rot_se = _attitude_residual(np.where(seen[..., None], diff, 0.0), markers - states[:, None, 0:3], seen, axes)
     return r, proj, rot, rot_se
@@ -88,9 +87,9 @@ def flight_residuals(problem: Problem, theta: np.ndarray) -> list[FlightResidual
         st, pred = tr.states[0], tr.markers[0]
         seen = f.observed                                          # (n, m)
         n_seen = np.sum(seen, axis=1)
-        r, proj, rot, rot_se = marker_series(f.positions - pred, st, pred, seen)
-        v = st[:, 3:6]
-        cov = {"alpha": angle_of_attack(v, st[:, 6:10]), "speed": np.linalg.norm(v, axis=1), "spin": st[:, 12],
+        air = problem.conditions(st, theta, k)
+        r, proj, rot, rot_se = marker_series(f.positions - pred, st, pred, seen, air)
+        cov = {"alpha": air.alpha[0], "speed": air.speed[0], "spin": st[:, 12],
                "height": st[:, 2], "time": f.times - f.times[0]}
         unit_se = {name: 1.0 / np.sqrt(np.maximum(n_seen, 1)) for name in DIRECTIONS} | rot_se
         out.append(FlightResiduals(f.name, f.times, r, n_seen, proj, cov, rot, unit_se))

@@ -23,7 +23,7 @@ import numpy as np
 from ..observation.explanations import DataExplanation
 from ..observation.markers import FlightObservation
 from ..observation.models import MarkerPositions, ObservationModel
-from ..physics import COEFFICIENT_NAMES, Disc, Environment, SimulatorSettings, Term, simulate
+from ..physics import COEFFICIENT_NAMES, Disc, Environment, SimulatorSettings, Term, flight_conditions, simulate
 from ..physics.frames import quat_from_rotvec, quat_multiply, quat_to_rotvec
 from .layout import IC_NAMES, ParameterLayout
 from .priors import IC_SD, coefficient_prior
@@ -256,6 +256,12 @@ class Problem:
         if not want_states and tr.states is not None:
             tr = replace(tr, states=None)
         return tr
+
+    def conditions(self, states: np.ndarray, theta: np.ndarray, k: int):
+        """Air-relative flight conditions (:class:`~bayes_disc.physics.FlightConditions`: v_a, air speed, D
+        frame, α, p, q, r) of flight k along ``states`` ((n, 13) or (B, n, 13)) for θ ((dim,) or (B, dim)):
+        the model's wind terms included."""
+        return flight_conditions(states, self.flights[k].times, self.terms, theta[..., self.layout.term_slice])
 
     def residuals(self, theta: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
         """Residuals (B, n_res_k) (predicted − measured, every channel of flight k; markers in m) and ok

@@ -15,12 +15,12 @@ local Gauss–Newton covariance is kept, so the path can seed a ridge proposal f
 """
 from __future__ import annotations
 
-import multiprocessing as mp
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import least_squares
 
+from ..physics.parallel import mp_context
 from .leastsq import whitened_jacobian, whitened_residuals, covariance_from_jacobian
 from .model import Problem
 
@@ -149,6 +149,10 @@ def profile_path(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
 _POOL: dict = {}
 
 
+def _init_profile_worker(data: dict) -> None:
+    _POOL.update(data)
+
+
 def _profile_task(index: int) -> ProfilePath:
     a = _POOL
     return profile_path(a["problem"], a["theta"], a["sigma"], a["cov"], index, **a["kwargs"])
@@ -162,7 +166,8 @@ def profile_paths(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, co
     try:
         if processes <= 1 or len(indices) <= 1:
             return [_profile_task(i) for i in indices]
-        with mp.get_context("fork").Pool(min(processes, len(indices))) as pool:
+        with mp_context().Pool(min(processes, len(indices)), initializer=_init_profile_worker,
+                               initargs=(dict(_POOL),)) as pool:
             return pool.map(_profile_task, indices)
     finally:
         _POOL.clear()

@@ -29,7 +29,6 @@
 from __future__ import annotations
 
 import json
-import multiprocessing as mp
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -37,6 +36,7 @@ from pathlib import Path
 import emcee
 import numpy as np
 
+from ..physics.parallel import mp_context
 from .config import SamplerSettings
 from .model import Problem
 from .proposals import CompositeProposal, Proposal
@@ -90,7 +90,7 @@ def initial_walkers(start: CompositeProposal, n: int, problem: Problem, rng: np.
 
 
 # ------------------------------------------------------------------------------------------------------
-# workers: one ensemble advanced by n steps; the problem is inherited by fork (no pickling of kernels)
+# workers: one ensemble advanced by n steps; the problem reaches them through the initializer
 _WORKER: dict = {}
 
 
@@ -227,7 +227,7 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
     coef_idx = np.arange(problem.n_coef + problem.n_ext)
     adapt_at = [settings.adapt_steps * (i + 1) for i in range(ADAPTATIONS)]
     history = []
-    ctx = mp.get_context("fork")
+    ctx = mp_context()
     bar = tqdm(total=settings.max_steps, initial=done, desc="sampling", unit="step", disable=not progress,
                leave=False)
     verdict = {"converged": False, "burn": min(done, adapt_at[-1]), "tau": np.full((1, problem.dim), np.nan)}

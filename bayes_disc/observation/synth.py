@@ -20,7 +20,8 @@ import numpy as np
 
 from ..physics import (COEFFICIENT_NAMES, LITERATURE, Coefficients, Disc, Environment, Trajectories, get_terms,
                        literature_coefficients, simulate)
-from ..physics.frames import (angle_of_attack, attitude_from_yaw_pitch_roll, omega_body_from_pqr,
+from ..physics.conditions import flight_conditions
+from ..physics.frames import (attitude_from_yaw_pitch_roll, omega_body_from_pqr,
                               quat_to_matrix)
 from .config_io import ConfigError, Section, load_yaml
 from .registry import DATA_EXPLANATION, PHYSICS_TERM, unit, split_extensions
@@ -178,7 +179,7 @@ def synthesize(spec: SynthSpec) -> SynthResult:
         drop = rng.random(pos.shape[:2]) < f.dropout
         pos[drop] = np.nan
         flights.append(FlightObservation(name=f.name, source="synth", times=times, marker_ids=ids, positions=pos))
-        alpha = angle_of_attack(states[:, 3:6], states[:, 6:10], spec.wind())
+        alpha = flight_conditions(states, times, terms, ext if ext.size else None).alpha[0]
         omega_w = np.einsum("nij,nj->ni", quat_to_matrix(states[:, 6:10]), states[:, 10:13])
         truth_flights[f.name] = {
             "initial_state": {"t": 0.0, "position_m": y0[:3].tolist(), "velocity_m_s": y0[3:6].tolist(),

@@ -1,5 +1,7 @@
 """Flight physics: constants, frames, the Newton–Euler model, extra terms and the simulator."""
-from .constants import (COEFFICIENT_NAMES, COEFFICIENT_UNITS, HUMMEL2002, LITERATURE, POTTS_CROWTHER, Coefficients, Disc,
+from .conditions import FlightConditions, flight_conditions
+from .constants import (COEFFICIENT_NAMES, COEFFICIENT_UNITS, HUMMEL2002, LITERATURE, POTTS_CROWTHER, Coefficients,
+                        Disc,
                         Environment, LiteratureSet, literature_coefficients)
 from .equations import STATE_SIZE, marker_positions, state_derivative
 from .simulator import SimulatorSettings, Trajectories, simulate, simulate_reference
@@ -9,5 +11,5 @@ __all__ = [
     "COEFFICIENT_NAMES", "COEFFICIENT_UNITS", "HUMMEL2002", "LITERATURE", "POTTS_CROWTHER", "Coefficients", "Disc", "Environment",
     "LiteratureSet", "literature_coefficients", "STATE_SIZE", "marker_positions", "state_derivative",
     "SimulatorSettings", "Trajectories", "simulate", "simulate_reference", "TERMS", "Term", "TermParameter",
-    "get_terms",
+    "get_terms", "FlightConditions", "flight_conditions",
 ]

@@ -22,7 +22,7 @@ from .terms import Term
 class SimulatorSettings:
     """Integrator settings.
 
-    method: Runge–Kutta tableau of :data:`.kernel.TABLEAUX` (default ``vern7``: Verner's 9-stage 7th
+    method: Runge–Kutta tableau of :data:`.tableaux.TABLEAUX` (default ``vern7``: Verner's 9-stage 7th
     order; also ``dop853`` 12-stage 8th order, ``rk6`` Butcher 7-stage 6th order, ``rk4``); step_factor
     c: the substep is h ≤ c/ω_c (see :mod:`.kernel`), None for the method's default; omega_cap [rad/s]:
     lanes faster than this are flagged; speed_cap [m/s]: lanes faster than this are flagged; fixed_rate
@@ -118,8 +118,9 @@ def simulate(initial_states, coefficients, times, *, t0: float | None = None, di
     n_ext = sum(len(t.parameters) for t in terms)
     if extension is None:
         extension = np.array([p.off_value for t in terms for p in t.parameters], dtype=float)
-    ext = _as_batch(np.asarray(extension, dtype=float).reshape(-1, n_ext) if n_ext else np.zeros((batch, 0)),
-                    n_ext, batch, "extension") if n_ext else np.zeros((batch, 0))
+    ext = np.asarray(extension, dtype=float)
+    ext = _as_batch(ext if ext.ndim == 1 else ext.reshape(-1, n_ext), n_ext, batch,
+                    "extension") if n_ext else np.zeros((batch, 0))
     mb = np.zeros((0, 3)) if marker_body is None else np.ascontiguousarray(np.asarray(marker_body, float))
     n = times.size
     out_states = np.empty((batch, n if want_states else 0, STATE_SIZE))

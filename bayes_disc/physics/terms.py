@@ -232,7 +232,3 @@ def get_terms(ids) -> tuple[Term, ...]:
         raise ValueError(f"physics terms listed twice: {list(ids)}")
     return tuple(out)
 
-
-def extension_names(terms) -> tuple[str, ...]:
-    """Names of all extra parameters of ``terms`` in kernel order."""
-    return tuple(n for t in terms for n in t.parameter_names)

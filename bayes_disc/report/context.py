@@ -307,29 +307,16 @@ class ReportContext:
                                  sigma_ref=float(sig[0])))
         return out
 
-    def _wind(self, theta: np.ndarray) -> np.ndarray | None:
-        """Wind (…, 3) [m/s] of θ (…, dim) when the model has the ``wind`` term, else None."""
-        names = self.problem.ext_names
-        if not {"wind_x", "wind_y", "wind_z"} <= set(names):
-            return None
-        i = [self.problem.n_coef + names.index(n) for n in ("wind_x", "wind_y", "wind_z")]
-        return theta[..., i]
-
     @cached_property
     def kinematics(self) -> list[dict]:
         """Per flight: α of the reference draw (n,) and of the band draws (B, n) [rad], air speed (n,) [m/s]
         and spin ω·b3 (n,) [rad/s] of the reference draw."""
-        from ..physics.frames import angle_of_attack
         out = []
-        w_ref = self._wind(self.theta_ref)
-        w_draw = self._wind(self.theta_draws)
-        for s in self.flight_sims:
-            st, sd = s.ref_states, s.draw_states
-            a_ref = angle_of_attack(st[:, 3:6], st[:, 6:10], None if w_ref is None else w_ref[None])
-            a_d = angle_of_attack(sd[..., 3:6], sd[..., 6:10], None if w_draw is None else w_draw[:, None, :])
-            v = st[:, 3:6] - (0.0 if w_ref is None else w_ref[None])
-            out.append({"alpha_ref": a_ref, "alpha_draws": a_d, "speed": np.linalg.norm(v, axis=1),
-                        "spin": st[:, 12]})
+        for k, s in enumerate(self.flight_sims):
+            ref = self.problem.conditions(s.ref_states, self.theta_ref, k)
+            draws = self.problem.conditions(s.draw_states, self.theta_draws, k)
+            out.append({"alpha_ref": ref.alpha[0], "alpha_draws": draws.alpha, "speed": ref.speed[0],
+                        "spin": s.ref_states[:, 12]})
         return out
 
     # -- truth ------------------------------------------------------------------------------------------
