@@ -261,7 +261,8 @@ def find_throws(log: InertialLog, settings: SegmentationSettings | None = None,
         Thresholds (defaults as documented there).
     override : list of (int, int), optional
         Explicit (start, end) logger rows per throw (end exclusive) replacing the automatic release
-        and impact; orientation is still measured. Each row must be present in the log.
+        and impact; orientation is still measured. Each row must be present in the log (``end`` may
+        also be one past the last row); an absent row raises KeyError.
 
     Returns
     -------
@@ -279,7 +280,7 @@ def find_throws(log: InertialLog, settings: SegmentationSettings | None = None,
             if not start < end:
                 raise ValueError(f"{log.name}: override start {start} must be before end {end}")
             a = log.position(start)
-            b = log.position(end) if end <= log.rows[-1] else len(log)
+            b = len(log) if end == int(log.rows[-1]) + 1 else log.position(end)
             if b - a < 3:
                 raise ValueError(f"{log.name}: override {start}..{end} holds fewer than 3 samples")
             out.append(_segment_at(log, name, a, b, (a, b), "override: explicit start and end rows",
