@@ -1,5 +1,4 @@
 """Row period from magnetometer vs gyro, and the barometer cadence: synthetic and real logs."""
-import math
 from pathlib import Path
 
 import numpy as np
