@@ -6,6 +6,7 @@ import numpy as np
 from ..observation.config_io import ConfigError
 from ..observation.explanations import EXPLANATIONS, get_explanations
 from ..observation.markers import load_flights
+from ..observation.plausibility import check_flights
 from ..physics import SimulatorSettings, get_terms
 from .config import RunConfig
 from .initial import initial_state_from_data
@@ -39,6 +40,7 @@ def build_problem(cfg: RunConfig, terms_override=None, flights=None) -> Problem:
     config's ``physics`` block."""
     flights = load_run_flights(cfg) if flights is None else flights
     mb = np.array([cfg.markers[i] for i in cfg.marker_ids], float)
+    check_flights(flights, mb, cfg.env.g)  # physical plausibility before any fitting (ImplausibleDataError)
     starts = []
     for f in flights:
         try:
