@@ -5,6 +5,7 @@ import numpy as np
 
 from ..observation.config_io import ConfigError
 from ..observation.markers import load_flights
+from ..observation.plausibility import check_flights
 from ..observation.registry import split_extensions
 from ..physics import SimulatorSettings
 from .config import RunConfig
@@ -39,6 +40,7 @@ def build_problem(cfg: RunConfig, terms_override=None, flights=None) -> Problem:
     config's ``physics`` block."""
     flights = load_run_flights(cfg) if flights is None else flights
     mb = np.array([cfg.markers[i] for i in cfg.marker_ids], float)
+    check_flights(flights, mb, cfg.env.g)  # physical plausibility before any fitting (ImplausibleDataError)
     starts = []
     for f in flights:
         try:

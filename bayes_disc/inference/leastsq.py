@@ -8,6 +8,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..physics import literature_coefficients
+from .fit_checks import check_fit_plausible
 from .model import Problem
 
 FAILED_RESIDUAL = 1e3  # whitened residual standing in for a failed simulation
@@ -105,6 +106,7 @@ def fit_least_squares(problem: Problem, starts: int = 4, max_nfev: int = 200, se
     out = refine_least_squares(problem, best.x, max_nfev=max_nfev)
     out.start_costs = [float(r.cost) for r in results]
     out.nfev += int(sum(r.nfev for r in results))
+    check_fit_plausible(out, problem)  # an RMS far above any marker noise stops here, before sampling
     return out
 
 

@@ -1,4 +1,9 @@
-"""Strict YAML reading shared by every configuration file: errors name the file and the key."""
+"""Strict YAML reading shared by every configuration file: errors name the file and the key.
+
+Text files (configs here, marker CSVs in :mod:`.markers`) are read as UTF-8 through :func:`decode_text`: a
+byte-order mark from a spreadsheet is dropped, Windows line ends are accepted, and a binary or non-UTF-8
+file is named as such (with the offending byte and its line) instead of ending in a traceback.
+"""
 from __future__ import annotations
 
 import math
@@ -16,12 +21,60 @@ class ConfigError(ValueError):
         super().__init__(f"{where}: {problem}")
 
 
+class TextDecodeError(ValueError):
+    """Bytes that are not a UTF-8 text file: ``line`` (1-based) of the first offending byte and the problem."""
+
+    def __init__(self, line: int, problem: str):
+        self.line, self.problem = line, problem
+        super().__init__(f"line {line}: {problem}")
+
+
+def decode_text(data: bytes) -> str:
+    """UTF-8 text of a file's bytes, without a leading byte-order mark.
+
+    Parameters
+    ----------
+    data : bytes
+        The file's content.
+
+    Returns
+    -------
+    str
+        The decoded text (line ends as in the file; ``csv`` and YAML readers accept CRLF).
+
+    Raises
+    ------
+    TextDecodeError
+        A NUL byte (a binary file) or a byte sequence that is not UTF-8, with its line.
+    """
+    nul = data.find(b"\x00")
+    if nul >= 0:
+        raise TextDecodeError(data.count(b"\n", 0, nul) + 1, "NUL byte: a binary file, not a UTF-8 text file")
+    body = data[3:] if data.startswith(b"\xef\xbb\xbf") else data
+    try:
+        return body.decode("utf-8")
+    except UnicodeDecodeError as e:
+        raise TextDecodeError(body.count(b"\n", 0, e.start) + 1,
+                              f"not a UTF-8 text file (byte 0x{body[e.start]:02x}); save it as UTF-8") from None
+
+
+def read_text(path) -> str:
+    """Text of an existing file through :func:`decode_text`; raises :class:`TextDecodeError`."""
+    return decode_text(Path(path).read_bytes())
+
+
 def load_yaml(path) -> dict:
     path = Path(path)
+    if path.is_dir():
+        raise ConfigError(path, None, "is a folder, not a file (expected a YAML config)")
     if not path.is_file():
         raise ConfigError(path, None, "file not found")
     try:
-        data = yaml.safe_load(path.read_text())
+        text = read_text(path)
+    except TextDecodeError as e:
+        raise ConfigError(path, None, str(e)) from None
+    try:
+        data = yaml.safe_load(text)
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         line = f"line {mark.line + 1}: " if mark is not None else ""

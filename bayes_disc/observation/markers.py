@@ -8,11 +8,15 @@ with a :class:`MarkerFileError` naming the file, the line and the problem; nothi
 from __future__ import annotations
 
 import csv
+import io
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from .config_io import TextDecodeError, read_text
 
 REQUIRED_COLUMNS = ("flight", "t", "marker", "x", "y", "z")
 #: marker spacing above this (m) on one disc means the file is not in metres
@@ -54,7 +58,8 @@ class MarkerTable:
 class FlightObservation:
     """One flight on its sample grid: times (n,), positions (n, n_markers, 3) with NaN where missing.
 
-    ``sigma`` (n, n_markers) holds per-point standard deviations [m] when the file gave ``sigma_m``.
+    ``sigma`` (n, n_markers) holds per-point standard deviations [m] when the file gave ``sigma_m``;
+    ``line`` is the 1-based line of the flight's first row in ``source`` when read from a file.
     """
 
     name: str
@@ -63,6 +68,7 @@ class FlightObservation:
     marker_ids: tuple[str, ...]
     positions: np.ndarray
     sigma: np.ndarray | None = None
+    line: int | None = None
 
     @property
     def observed(self) -> np.ndarray:
@@ -80,7 +86,7 @@ class FlightObservation:
         if t_end is not None:
             keep &= self.times <= t_end
         return FlightObservation(self.name, self.source, self.times[keep], self.marker_ids,
-                                 self.positions[keep], None if self.sigma is None else self.sigma[keep])
+                                 self.positions[keep], None if self.sigma is None else self.sigma[keep], self.line)
 
 
 def _float(text: str, path, line: int, column: str) -> float:
@@ -93,117 +99,234 @@ def _float(text: str, path, line: int, column: str) -> float:
     return value
 
 
+def _read_text(path: Path) -> str:
+    """The file's UTF-8 text (byte-order mark dropped); a folder, a binary or a non-UTF-8 file is named."""
+    if path.is_dir():
+        raise MarkerFileError(path, None, "is a folder, not a file (expected a marker CSV)")
+    if not path.is_file():
+        raise MarkerFileError(path, None, "file not found")
+    try:
+        return read_text(path)
+    except TextDecodeError as e:
+        raise MarkerFileError(path, e.line, e.problem) from None
+
+
+_DECIMAL_COMMA = re.compile(r"\d,\d")
+
+
+def _separator_problem(header: list[str], first_data_line: str | None) -> str | None:
+    """The reason a header that lacks the required columns was split wrongly, if it was (';' or tab)."""
+    if len(header) != 1:
+        return None
+    for sep, name in ((";", "';'"), ("\t", "tabs")):
+        if sep in header[0] and all(c in header[0].split(sep) for c in REQUIRED_COLUMNS[:3]):
+            if first_data_line is not None and _DECIMAL_COMMA.search(first_data_line):
+                return (f"fields separated by {name} with decimal commas: export as comma-separated with "
+                        "decimal points (docs/data-formats.md)")
+            return f"fields separated by {name}: export as comma-separated (docs/data-formats.md)"
+    return None
+
+
+def _parse_row(row: list[str], line: int, header: list[str], idx: dict, known, path):
+    """Reference validation of one data row (SPEC §4): (flight, t, marker, [x, y, z]) or MarkerFileError."""
+    if len(row) != len(header):
+        raise MarkerFileError(path, line, f"{len(row)} fields, header has {len(header)}")
+    flight = row[idx["flight"]].strip()
+    if not flight:
+        raise MarkerFileError(path, line, "empty flight name")
+    t = _float(row[idx["t"]], path, line, "t")
+    if math.isnan(t):
+        raise MarkerFileError(path, line, "time is NaN")
+    marker = row[idx["marker"]].strip()
+    if known is not None and marker not in known:
+        raise MarkerFileError(path, line, f"unknown marker {marker!r} (known: {', '.join(known)})")
+    xyz = [_float(row[idx[c]], path, line, c) for c in ("x", "y", "z")]
+    nan = [math.isnan(v) for v in xyz]
+    if any(nan) and not all(nan):
+        raise MarkerFileError(path, line, "some but not all coordinates are NaN")
+    if not any(nan) and max(abs(v) for v in xyz) > MAX_COORDINATE_M:
+        raise MarkerFileError(path, line, f"coordinate {max(abs(v) for v in xyz):g} m: looks like "
+                              "millimetres; marker files are in metres (docs/data-formats.md)")
+    return flight, t, marker, xyz
+
+
+def _first_bad_row(rows, lines, header, idx, known, path) -> None:
+    """Raise the error of the first row (file order) that breaks SPEC §4, checked one by one."""
+    for row, line in zip(rows, lines):
+        _parse_row(row, line, header, idx, known, path)
+    raise AssertionError("a row was flagged as invalid but passes the row-by-row check")
+
+
+def _columns_fast(rows, header, idx, known):
+    """Columns of well-formed rows, vectorised; None if any row breaks a rule (then :func:`_first_bad_row`
+    finds and names it). Returns (flight (n,), t (n,), marker (n,), xyz (n, 3))."""
+    n_fields = len(header)
+    if any(len(r) != n_fields for r in rows):
+        return None
+    cols = list(zip(*rows))
+    flight = [f.strip() for f in cols[idx["flight"]]]
+    marker = [m.strip() for m in cols[idx["marker"]]]
+    if not all(flight):
+        return None
+    if known is not None and not set(marker) <= set(known):
+        return None
+    try:
+        t = np.fromiter(map(float, cols[idx["t"]]), float, len(rows))
+        xyz = np.stack([np.fromiter(map(float, cols[idx[c]]), float, len(rows)) for c in ("x", "y", "z")], axis=1)
+    except ValueError:
+        return None
+    nan = np.isnan(xyz)
+    with np.errstate(invalid="ignore"):
+        big = np.nanmax(np.abs(np.where(nan, 0.0, xyz)), axis=1) > MAX_COORDINATE_M
+    if (not np.all(np.isfinite(t)) or np.isinf(xyz).any() or (nan.any(axis=1) & ~nan.all(axis=1)).any()
+            or big.any()):
+        return None
+    return np.array(flight, dtype=object), t, np.array(marker, dtype=object), xyz
+
+
+def _extra_value(text: str):
+    text = text.strip()
+    try:
+        return float(text) if text else math.nan
+    except ValueError:
+        return text
+
+
 def read_marker_csv(path, marker_ids=None) -> MarkerTable:
     """Read and validate a SPEC §4 marker file.
 
-    marker_ids: the known marker ids (config ``markers`` keys); a row with any other id is rejected.
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file (UTF-8; a byte-order mark and CRLF line ends are accepted).
+    marker_ids : sequence of str, optional
+        The known marker ids (config ``markers`` keys); a row with any other id is rejected.
+
+    Returns
+    -------
+    MarkerTable
+        The rows in file order, with their 1-based line numbers.
+
+    Raises
+    ------
+    MarkerFileError
+        Naming the file, the line and the problem (the first problem in file order). Time linear in rows.
     """
     path = Path(path)
-    if not path.is_file():
-        raise MarkerFileError(path, None, "file not found")
+    text = _read_text(path)
     known = None if marker_ids is None else [str(m) for m in marker_ids]
-    rows_f, rows_t, rows_m, rows_xyz, rows_line = [], [], [], [], []
-    extra_cols: dict[str, list] = {}
-    with path.open(newline="") as fh:
-        reader = csv.reader(fh)
-        try:
-            header = next(reader)
-        except StopIteration:
-            raise MarkerFileError(path, 1, "empty file: header 'flight,t,marker,x,y,z' required") from None
-        header = [h.strip() for h in header]
-        missing = [c for c in REQUIRED_COLUMNS if c not in header]
-        if missing:
-            raise MarkerFileError(path, 1, f"header lacks column(s) {missing}; required: {','.join(REQUIRED_COLUMNS)}")
-        if len(set(header)) != len(header):
-            raise MarkerFileError(path, 1, "header repeats a column name")
-        idx = {c: header.index(c) for c in header}
-        extras = [c for c in header if c not in REQUIRED_COLUMNS]
-        for c in extras:
-            extra_cols[c] = []
-        for row in reader:
-            line = reader.line_num
-            if not row or all(not c.strip() for c in row):
-                continue
-            if len(row) != len(header):
-                raise MarkerFileError(path, line, f"{len(row)} fields, header has {len(header)}")
-            flight = row[idx["flight"]].strip()
-            if not flight:
-                raise MarkerFileError(path, line, "empty flight name")
-            t = _float(row[idx["t"]], path, line, "t")
-            if math.isnan(t):
-                raise MarkerFileError(path, line, "time is NaN")
-            marker = row[idx["marker"]].strip()
-            if known is not None and marker not in known:
-                raise MarkerFileError(path, line, f"unknown marker {marker!r} (known: {', '.join(known)})")
-            xyz = [_float(row[idx[c]], path, line, c) for c in ("x", "y", "z")]
-            nan = [math.isnan(v) for v in xyz]
-            if any(nan) and not all(nan):
-                raise MarkerFileError(path, line, "some but not all coordinates are NaN")
-            if not any(nan) and max(abs(v) for v in xyz) > MAX_COORDINATE_M:
-                raise MarkerFileError(path, line, f"coordinate {max(abs(v) for v in xyz):g} m: looks like "
-                                      "millimetres; marker files are in metres (docs/data-formats.md)")
-            for c in extras:
-                text = row[idx[c]].strip()
-                try:
-                    extra_cols[c].append(float(text) if text else math.nan)
-                except ValueError:
-                    extra_cols[c].append(text)
-            rows_f.append(flight)
-            rows_t.append(t)
-            rows_m.append(marker)
-            rows_xyz.append(xyz)
-            rows_line.append(line)
-    if not rows_t:
+    reader = csv.reader(io.StringIO(text, newline=""))
+    try:
+        header = next(reader)
+    except StopIteration:
+        raise MarkerFileError(path, 1, "empty file: header 'flight,t,marker,x,y,z' required") from None
+    header = [h.strip() for h in header]
+    missing = [c for c in REQUIRED_COLUMNS if c not in header]
+    if missing:
+        after = text.split("\n", 2)
+        why = _separator_problem(header, after[1] if len(after) > 1 else None)
+        raise MarkerFileError(path, 1, why or f"header lacks column(s) {missing}; required: "
+                              f"{','.join(REQUIRED_COLUMNS)}")
+    if len(set(header)) != len(header):
+        raise MarkerFileError(path, 1, "header repeats a column name")
+    idx = {c: header.index(c) for c in header}
+    extras = [c for c in header if c not in REQUIRED_COLUMNS]
+    rows, lines = [], []
+    add_row, add_line = rows.append, lines.append
+    for row in reader:
+        if row and (row[0].strip() or any(c.strip() for c in row)):  # blank lines are skipped
+            add_row(row)
+            add_line(reader.line_num)
+    if not rows:
         raise MarkerFileError(path, None, "no data rows")
-    table = MarkerTable(flight=np.array(rows_f, dtype=object), t=np.array(rows_t, float),
-                        marker=np.array(rows_m, dtype=object), xyz=np.array(rows_xyz, float),
-                        extra={c: np.array(v) for c, v in extra_cols.items()}, lines=np.array(rows_line))
+    cols = _columns_fast(rows, header, idx, known)
+    if cols is None:
+        _first_bad_row(rows, lines, header, idx, known, path)
+    flight, t, marker, xyz = cols
+    extra = {c: np.array([_extra_value(r[idx[c]]) for r in rows]) for c in extras}
+    table = MarkerTable(flight=flight, t=t, marker=marker, xyz=xyz, extra=extra, lines=np.array(lines))
     validate_table(table, path)
     return table
 
 
+def group_rows(flight: np.ndarray) -> list[tuple[str, np.ndarray]]:
+    """Rows of each flight, flights in order of first appearance, rows in file order; linear in rows.
+
+    Parameters
+    ----------
+    flight : ndarray (n,) of str
+        Flight name of every row.
+
+    Returns
+    -------
+    list of (name, rows)
+        ``rows``: int array of the row indices of that flight.
+    """
+    codes: dict[str, int] = {}
+    inverse = np.fromiter((codes.setdefault(f, len(codes)) for f in flight.tolist()), np.int64, len(flight))
+    order = np.argsort(inverse, kind="stable")
+    bounds = np.searchsorted(inverse[order], np.arange(len(codes) + 1))
+    return [(name, order[bounds[k]:bounds[k + 1]]) for name, k in codes.items()]
+
+
 def validate_table(table: MarkerTable, path="<table>") -> None:
-    """Checks that need whole flights: time order, duplicates, marker count, units by marker spacing."""
+    """Checks that need whole flights: time order, duplicates, marker count, units by marker spacing.
+
+    Linear in the number of rows, whatever the number of flights; raises :class:`MarkerFileError` naming
+    the line of the first problem (flights in order of first appearance)."""
     lines = table.lines if table.lines is not None else np.arange(len(table)) + 2
-    for name in table.flights:
-        rows = np.flatnonzero(table.flight == name)
-        t = table.t[rows]
-        drop = np.flatnonzero(np.diff(t) < 0)
-        if drop.size:
-            r = rows[drop[0] + 1]
-            raise MarkerFileError(path, int(lines[r]), f"flight {name!r}: time {table.t[r]:g} s goes back "
-                                  f"from {table.t[rows[drop[0]]]:g} s (time must increase within a flight)")
+    codes: dict[str, int] = {}
+    marker_code = np.fromiter((codes.setdefault(m, len(codes)) for m in table.marker.tolist()), np.int64,
+                              len(table))
+    for name, rows in group_rows(table.flight):
+        _validate_flight(table, name, rows, lines, marker_code, path)
+
+
+def _validate_flight(table: MarkerTable, name: str, rows: np.ndarray, lines: np.ndarray, marker_code: np.ndarray,
+                     path) -> None:
+    t = table.t[rows]
+    drop = np.flatnonzero(np.diff(t) < 0)
+    if drop.size:
+        r = rows[drop[0] + 1]
+        raise MarkerFileError(path, int(lines[r]), f"flight {name!r}: time {table.t[r]:g} s goes back "
+                              f"from {table.t[rows[drop[0]]]:g} s (time must increase within a flight)")
+    markers = table.marker[rows]
+    # time is non-decreasing here, so a repeated (t, marker) pair shares a run of equal times
+    key = np.cumsum(np.r_[True, np.diff(t) > 0]) * (int(marker_code.max()) + 1) + marker_code[rows]
+    if np.unique(key).size < key.size:
         seen = {}
-        for r in rows:
-            key = (table.t[r], table.marker[r])
-            if key in seen:
-                raise MarkerFileError(path, int(lines[r]), f"flight {name!r}: marker {table.marker[r]!r} at "
-                                      f"t = {table.t[r]:g} s repeats line {seen[key]}")
-            seen[key] = int(lines[r])
-        finite = np.all(np.isfinite(table.xyz[rows]), axis=1)
-        ids = set(table.marker[rows][finite].tolist())
-        if len(ids) < 3:
-            raise MarkerFileError(path, int(lines[rows[0]]), f"flight {name!r}: only {len(ids)} marker(s) "
-                                  "observed; at least 3 are needed to fix the disc's attitude")
-        spacing = _median_spacing(table.t[rows], table.marker[rows], table.xyz[rows])
-        if spacing is not None and spacing > MAX_MARKER_SPACING_M:
-            raise MarkerFileError(path, int(lines[rows[0]]), f"flight {name!r}: markers are {spacing:.3g} apart "
-                                  "(median): looks like millimetres; marker files are in metres (docs/data-formats.md)")
+        for r, m in zip(rows.tolist(), markers.tolist()):
+            pair = (table.t[r], m)
+            if pair in seen:
+                raise MarkerFileError(path, int(lines[r]), f"flight {name!r}: marker {m!r} at "
+                                      f"t = {table.t[r]:g} s repeats line {seen[pair]}")
+            seen[pair] = int(lines[r])
+    finite = np.all(np.isfinite(table.xyz[rows]), axis=1)
+    ids = set(markers[finite].tolist())
+    if len(ids) < 3:
+        raise MarkerFileError(path, int(lines[rows[0]]), f"flight {name!r}: only {len(ids)} marker(s) "
+                              "observed; at least 3 are needed to fix the disc's attitude")
+    spacing = _median_spacing(t, markers, table.xyz[rows])
+    if spacing is not None and spacing > MAX_MARKER_SPACING_M:
+        raise MarkerFileError(path, int(lines[rows[0]]), f"flight {name!r}: markers are {spacing:.3g} apart "
+                              "(median): looks like millimetres; marker files are in metres (docs/data-formats.md)")
 
 
-def _median_spacing(t, marker, xyz) -> float | None:
+def _median_spacing(t, marker, xyz, max_samples: int = 200) -> float | None:
+    """Median distance [file units] between the first two markers seen at each of the first ``max_samples``
+    sample times that have two; None if no sample time has two."""
     order = np.argsort(t, kind="stable")
-    t, marker, xyz = t[order], marker[order], xyz[order]
-    starts = np.flatnonzero(np.r_[True, np.diff(t) > 0])
-    ends = np.r_[starts[1:], t.size]
-    d = []
-    for s, e in zip(starts, ends):
-        p = xyz[s:e][np.all(np.isfinite(xyz[s:e]), axis=1)]
-        if len(p) >= 2:
-            d.append(np.linalg.norm(p[0] - p[1]))
-        if len(d) >= 200:
-            break
-    return float(np.median(d)) if d else None
+    t, xyz = t[order], xyz[order]
+    group = np.cumsum(np.r_[True, np.diff(t) > 0])
+    fin = np.flatnonzero(np.all(np.isfinite(xyz), axis=1))
+    g = group[fin]
+    first = np.flatnonzero(np.r_[True, np.diff(g) > 0])
+    has_second = first + 1 < fin.size
+    has_second[has_second] = g[first[has_second] + 1] == g[first[has_second]]
+    a, b = fin[first[has_second]][:max_samples], fin[first[has_second] + 1][:max_samples]
+    if a.size == 0:
+        return None
+    return float(np.median(np.linalg.norm(xyz[a] - xyz[b], axis=1)))
 
 
 def write_marker_csv(path, table: MarkerTable, precision: int = 9) -> None:
@@ -245,24 +368,42 @@ def table_from_flights(flights: list[FlightObservation], drop_missing: bool = Tr
 
 
 def flights_from_table(table: MarkerTable, marker_ids, source: str = "") -> list[FlightObservation]:
-    """Per-flight arrays on each flight's sample grid (the distinct times of its rows)."""
+    """Per-flight arrays on each flight's sample grid (the distinct times of its rows); linear in rows.
+
+    Parameters
+    ----------
+    table : MarkerTable
+        Validated rows (every marker id among ``marker_ids``).
+    marker_ids : sequence of str
+        Marker order of the ``positions`` axis.
+    source : str
+        File name recorded in each flight (for messages).
+
+    Returns
+    -------
+    list of FlightObservation
+        Flights in order of first appearance; ``line`` is the line of the flight's first row.
+    """
     marker_ids = tuple(str(m) for m in marker_ids)
     col = {m: k for k, m in enumerate(marker_ids)}
+    unknown = sorted(set(table.marker.tolist()) - set(col))
+    if unknown:
+        raise KeyError(f"marker id(s) {unknown} not among {list(marker_ids)}")
+    k_all = np.fromiter((col[str(m)] for m in table.marker.tolist()), np.int64, len(table))
     sigma_col = table.extra.get("sigma_m")
     out = []
-    for name in table.flights:
-        rows = np.flatnonzero(table.flight == name)
+    for name, rows in group_rows(table.flight):
         times = np.unique(table.t[rows])
-        pos = np.full((times.size, len(marker_ids), 3), np.nan)
-        sig = np.full((times.size, len(marker_ids)), np.nan) if sigma_col is not None else None
         ti = np.searchsorted(times, table.t[rows])
-        for r, i in zip(rows, ti):
-            k = col[str(table.marker[r])]
-            pos[i, k] = table.xyz[r]
-            if sig is not None:
-                sig[i, k] = float(sigma_col[r])
+        pos = np.full((times.size, len(marker_ids), 3), np.nan)
+        pos[ti, k_all[rows]] = table.xyz[rows]
+        sig = None
+        if sigma_col is not None:
+            sig = np.full((times.size, len(marker_ids)), np.nan)
+            sig[ti, k_all[rows]] = np.asarray(sigma_col[rows], float)
+        line = None if table.lines is None else int(table.lines[rows[0]])
         out.append(FlightObservation(name=name, source=source, times=times, marker_ids=marker_ids,
-                                     positions=pos, sigma=sig))
+                                     positions=pos, sigma=sig, line=line))
     return out
 
 
