@@ -61,9 +61,17 @@ def test_same_seed_same_summary_and_outputs(tmp_path):
     # SPEC §6 keys for every coefficient and the flight's σ
     for name in ["CL0", "CLa", "CD0", "CDa", "CM0", "CMa", "CMq", "CRr", "CRp", "CNr", "sigma_short"]:
         assert set(a["parameters"][name]) >= {"mean", "sd", "q05", "q50", "q95", "r_hat", "ess_bulk"}
+    assert set(a["parameters"]["CLa"]) >= {"ess_tail", "mcse_mean", "mcse_sd", "r_hat_walkers"}
     idata = az.from_netcdf(str(runs[0] / "posterior.nc"))
-    assert {"posterior", "sample_stats", "prior", "observed_data"} <= set(idata.groups())
-    assert "CLa" in idata.posterior and "sigma_short" in idata.prior
+    assert {"posterior", "sample_stats", "prior", "observed_data", "log_likelihood",
+            "posterior_predictive"} <= set(idata.groups())
+    assert "CLa" in idata.posterior and list(idata.prior["sigma"].flight.values) == ["short"]
+    assert idata.posterior["x"].dims == ("chain", "draw", "flight") and "ensemble" in idata.posterior.coords
+    # ArviZ users: az.summary gives summary.json's ESS and MCSE, az.loo works on the run as written
+    row = az.summary(idata, var_names=["sigma"], round_to="none").loc["sigma[short]"]
+    assert a["parameters"]["sigma_short"]["ess_tail"] == pytest.approx(row["ess_tail"], rel=1e-9)
+    loo = az.loo(idata)
+    assert loo.n_data_points == a["flights"]["short"]["points"] and np.isfinite(loo.elpd_loo)
 
 
 def test_resume_continues_without_losing_samples(tmp_path):

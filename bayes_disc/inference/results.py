@@ -1,38 +1,214 @@
-"""Posterior summaries (SPEC §6 ``summary.json``), ArviZ InferenceData and the terminal table."""
+"""Posterior summaries (SPEC §6 ``summary.json``), ArviZ InferenceData (``posterior.nc``) and the terminal table.
+
+Layout of ``posterior.nc`` (ArviZ InferenceData; :func:`build_inference_data`):
+
+* ``posterior``: dims ``chain`` × ``draw``; every emcee walker is one chain (``chain`` has the non-index
+  coordinates ``ensemble`` and ``walker``: chain ``c`` is walker ``walker[c]`` of the independent ensemble
+  ``ensemble[c]``), ``draw`` is the kept step after burn-in. Coefficients and extra-term parameters are
+  scalar variables (``CLa``, ``CY`` …); each flight's initial conditions (``x y z vx vy vz th1 th2 th3 wx wy
+  wz``, units in their ``units`` attribute) and noise scale ``sigma`` [m] have a ``flight`` dimension.
+  summary.json keeps the flat names of SPEC §6: ``x_<flight>`` is ``posterior["x"].sel(flight=<flight>)``,
+  ``sigma_<flight>`` is ``posterior["sigma"].sel(flight=<flight>)`` (:func:`posterior_draws` reads either).
+* ``sample_stats``: ``lp``, the log-posterior of θ (σ integrated out) of every sample.
+* ``log_likelihood``: ``markers`` (chain, draw, point), pointwise log-likelihood of every observed marker
+  point (the three coordinates of one marker at one sample time form one observation) for a thinned set of
+  draws, ``log N(y | m(θ), σ_f² I₃)`` with the draw's own σ_f; ``point`` carries ``point_flight``,
+  ``point_time`` and ``point_marker`` coordinates. ``az.loo(idata)`` / ``az.compare`` use it.
+* ``posterior_predictive``: ``markers_<flight>`` (chain, draw, time, marker, axis) [m], simulated markers
+  plus N(0, σ_f²) noise for a thinned set of draws, dims as ``observed_data``.
+* ``prior``, ``observed_data`` (``markers_<flight>``, NaN where a marker was not seen).
+
+R-hat: ``summary.json``'s ``r_hat`` is the rank-normalised split R-hat with the independent *ensembles* as
+chains (walkers of an ensemble pooled step by step: the sampler's stopping rule), i.e.
+``az.rhat(ensemble_view(idata))``. ``az.summary(idata)`` treats every *walker* as a chain and reports that
+walker-level R-hat, which summary.json records as ``r_hat_walkers``; ``ess_bulk``, ``ess_tail``,
+``mcse_mean`` and ``mcse_sd`` in summary.json are exactly ``az.summary(idata)``'s.
+"""
 from __future__ import annotations
 
+import contextlib
 import warnings
+from pathlib import Path
 
 import arviz as az
 import numpy as np
+import xarray as xr
 
 from ..physics import COEFFICIENT_NAMES, LITERATURE
-from .diagnostics_mcmc import ess_bulk, rhat_across
-from .model import Problem
+from .model import IC_NAMES, IC_UNITS, Problem
 from .priors import coefficient_prior
 from .sampler import Chains
 
+#: posterior.nc variables with a ``flight`` dimension: the initial conditions and the noise scale σ [m]
+FLIGHT_VARIABLES = IC_NAMES + ("sigma",)
+#: most (chain × draw) samples in the ``log_likelihood`` group (float32; ~4000 draws × ~1300 points: ~21 MB)
+N_LOG_LIKELIHOOD_DRAWS = 4000
+#: most (chain × draw) samples in the ``posterior_predictive`` group (float32; demo: ~16 MB)
+N_PREDICTIVE_DRAWS = 1000
+#: simulated in one batch when computing the pointwise log-likelihood
+BATCH = 500
 
-def public_samples(problem: Problem, theta: np.ndarray, sigma: np.ndarray) -> dict:
-    """Samples θ (..., dim) and σ (..., n_flights) → {public name: values} (σ in m)."""
-    out = {n: theta[..., i] for i, n in enumerate(problem.names)}
-    out.update({n: sigma[..., k] for k, n in enumerate(problem.sigma_names)})
+
+@contextlib.contextmanager
+def _walkers_as_chains():
+    """ArviZ warns when there are more chains than draws: with walkers as chains that is the intended layout
+    of a short run. Only that warning is filtered."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=r"More chains \(\d+\) than draws", category=UserWarning)
+        yield
+
+
+def structured_samples(problem: Problem, theta: np.ndarray, sigma: np.ndarray) -> dict:
+    """Samples in the posterior.nc layout.
+
+    Parameters
+    ----------
+    problem : Problem
+        The run's model.
+    theta : ndarray, shape (..., problem.dim)
+        Parameter vectors in model order.
+    sigma : ndarray, shape (..., problem.n_flights)
+        Noise scale of each flight [m].
+
+    Returns
+    -------
+    dict
+        ``{name: (...,)}`` for coefficients and extra-term parameters, ``{ic_name: (..., n_flights)}`` for the
+        twelve initial-condition components and ``{"sigma": (..., n_flights)}``.
+    """
+    scalar = problem.names[: problem.ic_start]
+    clash = set(scalar) & set(FLIGHT_VARIABLES)
+    if clash:
+        raise ValueError(f"parameter name(s) {sorted(clash)} clash with posterior.nc's per-flight variables")
+    out = {n: theta[..., i] for i, n in enumerate(scalar)}
+    for j, n in enumerate(IC_NAMES):
+        out[n] = theta[..., [problem.ic_slice(k).start + j for k in range(problem.n_flights)]]
+    out["sigma"] = np.asarray(sigma)
     return out
 
 
-def summarize(problem: Problem, chains: Chains) -> dict:
-    post = np.concatenate([chains.chain, chains.sigma], axis=-1)
-    rh = rhat_across(post)
-    ess = ess_bulk(post)
-    flat = post.reshape(-1, post.shape[-1])
+def _locate(posterior: xr.Dataset, name: str) -> tuple[str, str | None]:
+    """(variable, flight or None) holding the summary.json parameter ``name`` in ``posterior``."""
+    if name in posterior.data_vars and "flight" not in posterior[name].dims:
+        return name, None
+    if "flight" in posterior.coords:
+        flights = {str(f) for f in posterior["flight"].values}
+        for var in FLIGHT_VARIABLES:
+            if name.startswith(var + "_") and name[len(var) + 1:] in flights and var in posterior.data_vars:
+                return var, name[len(var) + 1:]
+    raise KeyError(f"posterior has no parameter {name!r}")
+
+
+def posterior_draws(posterior: xr.Dataset, name: str) -> np.ndarray:
+    """Samples of one summary.json parameter from a posterior group.
+
+    Parameters
+    ----------
+    posterior : xarray.Dataset
+        ``idata.posterior`` of a posterior.nc (the layout with a ``flight`` dimension, or the older one with
+        one variable per flight parameter).
+    name : str
+        summary.json name: a coefficient (``CLa``), ``sigma_<flight>`` or an initial condition ``x_<flight>``.
+
+    Returns
+    -------
+    ndarray, shape (n_chain, n_draw)
+        The samples (units of the parameter; σ in m).
+
+    Raises
+    ------
+    KeyError
+        If the posterior holds no such parameter.
+    """
+    var, flight = _locate(posterior, name)
+    x = posterior[var] if flight is None else posterior[var].sel(flight=flight)
+    return np.asarray(x.transpose("chain", "draw").values)
+
+
+def has_parameter(posterior: xr.Dataset, name: str) -> bool:
+    """Whether :func:`posterior_draws` finds ``name`` in ``posterior``."""
+    try:
+        _locate(posterior, name)
+    except KeyError:
+        return False
+    return True
+
+
+def ensemble_view(posterior: xr.Dataset) -> xr.Dataset:
+    """The posterior with the independent ensembles as chains (walkers pooled step by step).
+
+    ``az.rhat(ensemble_view(idata.posterior))`` is summary.json's ``r_hat`` (the split halves are early and
+    late steps). Needs the ``ensemble`` and ``walker`` coordinates of ``chain``.
+
+    Parameters
+    ----------
+    posterior : xarray.Dataset
+        ``idata.posterior`` with dims (chain, draw, ...), chain = walker.
+
+    Returns
+    -------
+    xarray.Dataset
+        Same variables with dims (chain, draw, ...): chain = ensemble, draw = step·n_walkers + walker.
+    """
+    if "ensemble" not in posterior.coords or "walker" not in posterior.coords:
+        raise KeyError("posterior has no 'ensemble'/'walker' coordinates (posterior.nc from an older version)")
+    ens = np.asarray(posterior["ensemble"].values, int)
+    walker = np.asarray(posterior["walker"].values, int)
+    n_ens, n_w = ens.max() + 1, walker.max() + 1
+    if ens.size != n_ens * n_w or len(set(zip(ens, walker))) != ens.size:
+        raise ValueError("chains do not form a full ensemble × walker grid")
+    order = np.lexsort((walker, ens))
+    n_draw = posterior.sizes["draw"]
+    data = {}
+    for v, da in posterior.data_vars.items():
+        rest = [d for d in da.dims if d not in ("chain", "draw")]
+        x = da.transpose("chain", "draw", *rest).values[order]
+        x = x.reshape(n_ens, n_w, n_draw, *x.shape[2:]).swapaxes(1, 2).reshape(n_ens, n_draw * n_w, *x.shape[2:])
+        data[v] = (("chain", "draw", *rest), x)
+    coords = {d: posterior.coords[d] for d in posterior.dims if d not in ("chain", "draw") and d in posterior.coords}
+    return xr.Dataset(data, coords={**coords, "chain": np.arange(n_ens), "draw": np.arange(n_draw * n_w)})
+
+
+def summary_names(problem: Problem) -> list[str]:
+    """summary.json parameter names in order: θ's (coefficients, extra terms, initial conditions), then σ."""
+    return list(problem.names) + list(problem.sigma_names)
+
+
+def summarize(idata, names) -> dict:
+    """summary.json ``parameters`` records from posterior.nc's InferenceData.
+
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+        Built by :func:`build_inference_data` (posterior with ``ensemble``/``walker`` chain coordinates).
+    names : list of str
+        summary.json parameter names (:func:`summary_names`).
+
+    Returns
+    -------
+    dict
+        ``{name: {"mean", "sd", "q05", "q50", "q95", "q025", "q975", "r_hat", "r_hat_walkers", "ess_bulk",
+        "ess_tail", "mcse_mean", "mcse_sd"}}`` in the parameter's unit (σ in m; ESS in samples). ``r_hat`` is
+        across ensembles (``az.rhat(ensemble_view(idata.posterior))``); ``r_hat_walkers``, the ESS and the MCSE
+        are ``az.summary(idata, kind="diagnostics")``'s (walkers as chains).
+    """
+    post = idata.posterior
+    with _walkers_as_chains():
+        diag = az.summary(idata, kind="diagnostics", round_to="none")
+        rh = az.rhat(ensemble_view(post), method="rank")
     params = {}
-    samples = public_samples(problem, flat[:, : problem.dim], flat[:, problem.dim:])
-    for i, (name, values) in enumerate(samples.items()):
-        q05, q50, q95 = np.quantile(values, [0.05, 0.5, 0.95])
-        q025, q975 = np.quantile(values, [0.025, 0.975])
+    for name in names:
+        var, flight = _locate(post, name)
+        label = var if flight is None else f"{var}[{flight}]"
+        row = diag.loc[label]
+        r = rh[var] if flight is None else rh[var].sel(flight=flight)
+        values = posterior_draws(post, name).reshape(-1)
+        q025, q05, q50, q95, q975 = np.quantile(values, [0.025, 0.05, 0.5, 0.95, 0.975])
         params[name] = {"mean": float(values.mean()), "sd": float(values.std(ddof=1)), "q05": float(q05),
                         "q50": float(q50), "q95": float(q95), "q025": float(q025), "q975": float(q975),
-                        "r_hat": float(rh[i]), "ess_bulk": float(ess[i])}
+                        "r_hat": float(r), "r_hat_walkers": float(row["r_hat"]), "ess_bulk": float(row["ess_bulk"]),
+                        "ess_tail": float(row["ess_tail"]), "mcse_mean": float(row["mcse_mean"]),
+                        "mcse_sd": float(row["mcse_sd"])}
     return params
 
 
@@ -40,8 +216,9 @@ def literature_table() -> dict:
     return {k: dict(s.values) for k, s in LITERATURE.items()}
 
 
-def build_summary(problem: Problem, chains: Chains, ls_dict: dict, cfg_info: dict) -> dict:
-    params = summarize(problem, chains)
+def build_summary(problem: Problem, chains: Chains, idata, ls_dict: dict, cfg_info: dict) -> dict:
+    """summary.json (SPEC §6) of a run: parameter records (:func:`summarize`), convergence, literature."""
+    params = summarize(idata, summary_names(problem))
     coef = list(COEFFICIENT_NAMES) + problem.ext_names
     tau = np.nanmax(chains.tau, axis=0)
     return {
@@ -58,6 +235,8 @@ def build_summary(problem: Problem, chains: Chains, ls_dict: dict, cfg_info: dic
             "tau_steps": {n: float(t) for n, t in zip(problem.names, tau)},
             "n_over_tau": float(chains.chain.shape[1] / np.nanmax(tau)),
             "r_hat_max": float(max(p["r_hat"] for p in params.values())),
+            "r_hat_definition": "rank-normalised split R-hat across the independent ensembles (walkers pooled); "
+                                "r_hat_walkers: the same statistic with every walker as a chain (az.summary)",
             "ess_bulk_min_coefficient": float(min(params[c]["ess_bulk"] for c in coef)),
             "acceptance_mean": float(np.mean(chains.acceptance)),
         },
@@ -66,30 +245,218 @@ def build_summary(problem: Problem, chains: Chains, ls_dict: dict, cfg_info: dic
     }
 
 
-def build_inference_data(problem: Problem, chains: Chains, rng: np.random.Generator, n_prior: int = 4000):
+# ---------------------------------------------------------------------------------------------- netCDF
+def _thinned_steps(n_chain: int, n_steps: int, n_max: int) -> np.ndarray:
+    """Evenly spaced kept-step indices so that n_chain × len ≤ n_max (at least one step)."""
+    k = max(1, min(n_steps, n_max // max(n_chain, 1)))
+    return np.unique(np.linspace(0, n_steps - 1, k).round().astype(int))
+
+
+def observation_points(problem: Problem) -> dict:
+    """Coordinates of the observed marker points, flight by flight in time-major order.
+
+    Returns
+    -------
+    dict
+        ``point_flight`` (P,) str, ``point_time`` (P,) [s], ``point_marker`` (P,) str: the P observed
+        (time, marker) pairs, the order of :func:`pointwise_log_likelihood`'s last axis.
+    """
+    fl, t, m = [], [], []
+    for f in problem.flights:
+        ti, mi = np.nonzero(f.observed)
+        fl += [f.name] * ti.size
+        t.append(f.times[ti])
+        m += [str(f.marker_ids[j]) for j in mi]
+    return {"point_flight": np.array(fl), "point_time": np.concatenate(t), "point_marker": np.array(m)}
+
+
+def pointwise_log_likelihood(problem: Problem, theta: np.ndarray, sigma: np.ndarray):
+    """Per observed marker point log N(y | m(θ), σ_f² I₃) and the simulated markers.
+
+    Parameters
+    ----------
+    problem : Problem
+        The run's model.
+    theta : ndarray, shape (B, problem.dim)
+        Posterior draws.
+    sigma : ndarray, shape (B, problem.n_flights)
+        Each draw's noise scales [m] (drawn jointly with θ).
+
+    Returns
+    -------
+    log_lik : ndarray, shape (B, P)
+        Log-density [log m⁻³] of each observed point (three coordinates), points as in
+        :func:`observation_points`; summed over points of flight f it is the conditional log-likelihood
+        −(3 n_f/2) log(2πσ_f²) − S_f/(2σ_f²).
+    markers : list of ndarray, shape (B, n_times_f, n_markers, 3)
+        Simulated markers [m] of every flight (at every sample time, also where unobserved).
+
+    Raises
+    ------
+    RuntimeError
+        If a posterior draw's simulation fails (it had a finite posterior density when it was sampled).
+    """
+    theta = np.atleast_2d(theta)
+    out, sims = [], []
+    for k, f in enumerate(problem.flights):
+        markers = np.concatenate([problem.simulate(theta[i: i + BATCH], k, want_states=False).markers
+                                  for i in range(0, theta.shape[0], BATCH)])
+        r = markers[:, f.observed] - f.positions[f.observed][None]         # (B, n_points_f, 3)
+        if not np.all(np.isfinite(r)):
+            raise RuntimeError(f"flight {f.name}: a posterior draw no longer simulates")
+        s2 = sigma[:, k, None] ** 2
+        out.append(-1.5 * np.log(2 * np.pi * s2) - 0.5 * np.sum(r * r, axis=2) / s2)
+        sims.append(markers)
+    return np.concatenate(out, axis=1), sims
+
+
+def build_inference_data(problem: Problem, chains: Chains, rng: np.random.Generator, n_prior: int = 4000,
+                         n_log_likelihood: int = N_LOG_LIKELIHOOD_DRAWS, n_predictive: int = N_PREDICTIVE_DRAWS):
+    """posterior.nc of a run (layout in this module's docstring).
+
+    Parameters
+    ----------
+    problem : Problem
+        The run's model.
+    chains : Chains
+        Kept samples, (n_ensembles, n_steps, n_walkers, ·).
+    rng : numpy.random.Generator
+        For the prior draws and the predictive noise.
+    n_prior : int
+        Prior draws.
+    n_log_likelihood, n_predictive : int
+        Most chain × draw samples in the ``log_likelihood`` and ``posterior_predictive`` groups (every
+        walker, evenly spaced kept steps; re-simulated).
+
+    Returns
+    -------
+    arviz.InferenceData
+    """
     n_ens, n_steps, n_w, dim = chains.chain.shape
-    per_walker = np.moveaxis(chains.chain, 2, 1).reshape(n_ens * n_w, n_steps, dim)
-    sig = np.moveaxis(chains.sigma, 2, 1).reshape(n_ens * n_w, n_steps, -1)
-    posterior = public_samples(problem, per_walker, sig)
-    lp = np.moveaxis(chains.log_prob, 2, 1).reshape(n_ens * n_w, n_steps)
-    # prior on σ_f is the improper 1/σ; the prior group shows it on [10 µm, 10 cm] (log-uniform)
+    n_chain = n_ens * n_w
+    per_walker = np.moveaxis(chains.chain, 2, 1).reshape(n_chain, n_steps, dim)
+    sig = np.moveaxis(chains.sigma, 2, 1).reshape(n_chain, n_steps, -1)
+    lp = np.moveaxis(chains.log_prob, 2, 1).reshape(n_chain, n_steps)
+    flights = [f.name for f in problem.flights]
+    flight_dims = {n: ["flight"] for n in FLIGHT_VARIABLES}
+    # the improper 1/σ prior is shown on [10 µm, 10 cm] (log-uniform)
     prior_sigma = np.exp(rng.uniform(np.log(1e-5), np.log(0.1), size=(1, n_prior, problem.n_flights)))
-    prior = public_samples(problem, problem.sample_prior(n_prior, rng)[None], prior_sigma)
-    observed, coords, dims = {}, {}, {}
+    prior = structured_samples(problem, problem.sample_prior(n_prior, rng)[None], prior_sigma)
+    observed, obs_coords, obs_dims = {}, {}, {}
     for f in problem.flights:
         key = f"markers_{f.name}"
         observed[key] = f.positions
-        coords[f"time_{f.name}"] = f.times
-        dims[key] = [f"time_{f.name}", "marker", "axis"]
-    coords.update(marker=list(problem.flights[0].marker_ids), axis=["x", "y", "z"])
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # short runs: "more chains than draws" is fine
-        idata = az.from_dict(posterior=posterior, sample_stats={"lp": lp}, prior=prior, observed_data=observed,
-                             coords=coords, dims=dims)
-    idata.posterior.attrs["ensemble_of_chain"] = np.repeat(np.arange(n_ens), n_w).tolist()
-    idata.posterior.attrs["note"] = ("chains are emcee walkers; walker w of ensemble e is chain e*n_walkers+w; "
-                                     "R-hat in summary.json is computed across ensembles")
+        obs_coords[f"time_{f.name}"] = f.times
+        obs_dims[key] = [f"time_{f.name}", "marker", "axis"]
+    obs_coords.update(marker=[str(m) for m in problem.flights[0].marker_ids], axis=["x", "y", "z"])
+    # thinned draws: pointwise log-likelihood and posterior predictive from one simulation
+    ll_steps = _thinned_steps(n_chain, n_steps, n_log_likelihood)
+    pp_steps = ll_steps[_thinned_steps(n_chain, ll_steps.size, n_predictive)]
+    th = per_walker[:, ll_steps].reshape(-1, dim)
+    sg = sig[:, ll_steps].reshape(-1, problem.n_flights)
+    log_lik, sims = pointwise_log_likelihood(problem, th, sg)
+    points = observation_points(problem)
+    keep = np.isin(ll_steps, pp_steps)
+    predictive = {}
+    for k, f in enumerate(problem.flights):
+        m = sims[k].reshape(n_chain, ll_steps.size, *sims[k].shape[1:])[:, keep]
+        s = sig[:, pp_steps, k][..., None, None, None]
+        predictive[f"markers_{f.name}"] = (m + s * rng.standard_normal(m.shape)).astype(np.float32)
+    with _walkers_as_chains():
+        idata = az.from_dict(
+            posterior=structured_samples(problem, per_walker, sig), sample_stats={"lp": lp},
+            prior=prior, observed_data=observed,
+            coords={**obs_coords, "flight": flights},
+            dims={**flight_dims, **obs_dims})
+        idata.add_groups(
+            log_likelihood=xr.Dataset(
+                {"markers": (("chain", "draw", "point"),
+                             log_lik.reshape(n_chain, ll_steps.size, -1).astype(np.float32))},
+                coords={"chain": np.arange(n_chain), "draw": ll_steps, "point": np.arange(log_lik.shape[1]),
+                        **{c: ("point", v) for c, v in points.items()}}),
+            posterior_predictive=xr.Dataset(
+                {k: (("chain", "draw", *obs_dims[k]), v) for k, v in predictive.items()},
+                coords={"chain": np.arange(n_chain), "draw": pp_steps, **obs_coords}))
+    ens_coords = {"ensemble": ("chain", np.repeat(np.arange(n_ens), n_w)),
+                  "walker": ("chain", np.tile(np.arange(n_w), n_ens))}
+    for group in ("posterior", "sample_stats", "log_likelihood", "posterior_predictive"):
+        idata[group] = idata[group].assign_coords(ens_coords)
+    for n, unit in zip(IC_NAMES, IC_UNITS):
+        idata.posterior[n].attrs["units"] = unit
+        idata.prior[n].attrs["units"] = unit
+    idata.posterior["sigma"].attrs["units"] = "m"
+    idata.prior["sigma"].attrs["units"] = "m"
+    idata.posterior.attrs["chain_layout"] = (f"every emcee walker is a chain: chain c is walker walker[c] of the "
+                                             f"independent ensemble ensemble[c] ({n_ens} ensembles × {n_w} walkers)")
+    idata.posterior.attrs["r_hat"] = (
+        "summary.json r_hat: rank-normalised split R-hat across ensembles (walkers pooled step by step), "
+        "= az.rhat(bayes_disc.inference.results.ensemble_view(idata.posterior)); az.summary(idata) treats "
+        "each walker as a chain and gives summary.json's r_hat_walkers")
+    idata.log_likelihood.attrs["observation"] = (
+        "one observed marker point (its x, y, z at one time): log N(y | m(theta), sigma_f^2 I3) with the "
+        "draw's own sigma_f; every walker, evenly spaced kept steps (draw = kept step index)")
+    idata.posterior_predictive.attrs["content"] = ("simulated markers + N(0, sigma_f^2) noise, every walker, "
+                                                   "evenly spaced kept steps (draw = kept step index)")
     return idata
+
+
+def load_posterior(path) -> az.InferenceData:
+    """Read a posterior.nc into memory (the file is closed afterwards, so a later run can rewrite it).
+
+    Parameters
+    ----------
+    path : str or Path
+        A posterior.nc written by ``bayes-disc sample``.
+
+    Returns
+    -------
+    arviz.InferenceData
+    """
+    with az.rc_context({"data.load": "eager"}):
+        return az.from_netcdf(str(path))
+
+
+def compare_runs(run_dirs, ic: str = "loo"):
+    """PSIS-LOO comparison of sampled runs of the same observations (``az.compare``).
+
+    Parameters
+    ----------
+    run_dirs : sequence of str or Path, or dict {label: path}
+        Output folders of ``bayes-disc sample`` (each with a posterior.nc that has a ``log_likelihood``
+        group); labels default to the folder's run name (its parent folder's name for ``out``).
+    ic : str
+        Information criterion passed to ``az.compare`` ("loo").
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``az.compare``'s table, best model first: ``elpd_loo`` (log density, sum over observed marker
+        points), ``p_loo``, ``elpd_diff``, ``weight``, ``se``, ``dse``, ``warning``.
+
+    Raises
+    ------
+    ValueError
+        If fewer than two runs are given, a posterior.nc lacks the ``log_likelihood`` group, or the runs'
+        observed marker points differ (their LOO values would not be comparable).
+    """
+    items = dict(run_dirs) if isinstance(run_dirs, dict) else {
+        (Path(d).parent.name if Path(d).name == "out" else Path(d).name): d for d in run_dirs}
+    if len(items) < 2:
+        raise ValueError("compare_runs needs at least two runs (distinct labels)")
+    data, ref = {}, None
+    for label, d in items.items():
+        path = Path(d) / "posterior.nc"
+        idata = load_posterior(path)
+        if "log_likelihood" not in idata.groups():
+            raise ValueError(f"{path}: no log_likelihood group (written before pointwise log-likelihoods; re-run "
+                             "`bayes-disc sample`)")
+        ll = idata.log_likelihood
+        key = tuple(np.asarray(ll[c].values).tobytes() for c in ("point_flight", "point_time", "point_marker"))
+        if ref is not None and key != ref[1]:
+            raise ValueError(f"{path}: observed marker points differ from {ref[0]}'s: LOO is not comparable")
+        ref = ref or (path, key)
+        data[label] = idata
+    return az.compare(data, ic=ic)
 
 
 def format_table(summary: dict) -> str:

@@ -69,9 +69,9 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True, log=
     chains = run_sampler(problem, proposal, cfg.sampler, out, resume=resume, progress=progress)
     info = {"name": cfg.name, "config": str(cfg.path), "flights": _flight_info(problem),
             "sampler_settings": asdict(cfg.sampler), "markers": cfg.markers}
-    summary = build_summary(problem, chains, ls_dict, info)
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
     idata = build_inference_data(problem, chains, np.random.default_rng(cfg.sampler.seed))
+    summary = build_summary(problem, chains, idata, ls_dict, info)
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
     idata.to_netcdf(str(out / "posterior.nc"))
     from ..report.content import software_versions
     run_info = {"wall_time_s": time.perf_counter() - t0, "sampling_wall_time_s": chains.wall_time_s,

@@ -8,7 +8,6 @@ the context (no module-level state). All random choices use ``numpy.random.defau
 from __future__ import annotations
 
 import json
-import warnings
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -72,7 +71,6 @@ def _find_config(run_dir: Path, recorded: str | None) -> Path:
 
 def load_run(run_dir) -> RunData:
     """Read and check a run folder written by ``bayes-disc sample``."""
-    import arviz as az
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise ReportInputError(run_dir, "run folder not found")
@@ -84,17 +82,15 @@ def load_run(run_dir) -> RunData:
     pp = run_dir / "posterior.nc"
     if not pp.is_file():
         raise ReportInputError(pp, "file not found (is this a `bayes-disc sample` output folder?)")
+    from ..inference.results import has_parameter, load_posterior
     try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            # eager: a lazily opened file would stay open and block the next `sample` from rewriting it
-            with az.rc_context({"data.load": "eager"}):
-                idata = az.from_netcdf(str(pp))
+        # eager: a lazily opened file would stay open and block the next `sample` from rewriting it
+        idata = load_posterior(pp)
     except Exception as e:  # netCDF/HDF errors come in many types
         raise ReportInputError(pp, f"cannot read as ArviZ InferenceData ({type(e).__name__}: {e})") from None
     if "posterior" not in idata.groups():
         raise ReportInputError(pp, "no posterior group")
-    absent = [n for n in summary["parameters"] if n not in idata.posterior]
+    absent = [n for n in summary["parameters"] if not has_parameter(idata.posterior, n)]
     if absent:
         raise ReportInputError(pp, f"posterior lacks parameter(s) {absent[:5]} listed in summary.json")
     run_info = _read_json(run_dir / "run_info.json", required=False) or {}
@@ -113,10 +109,6 @@ def load_run(run_dir) -> RunData:
         extras[stem] = _read_json(run_dir / f"{stem}.json", required=False)
     return RunData(run_dir=run_dir, summary=summary, idata=idata, run_info=run_info, config_path=config_path,
                    truth=truth, extras=extras)
-
-
-def _public_name(name: str) -> str:
-    return "sigma_" + name[len("log_sigma_"):] if name.startswith("log_sigma_") else name
 
 
 @dataclass
@@ -186,8 +178,8 @@ class ReportContext:
             changed = sorted(set(now) ^ set(then)) or sorted(k for k in now if now[k] != then[k])
             raise ReportInputError(self.run.config_path, f"flight data differ from the run's summary.json "
                                    f"(flight(s) {changed}): data or config changed since the run")
-        needed = [_public_name(n) for n in problem.names] + [f"sigma_{f.name}" for f in problem.flights]
-        missing = [n for n in needed if n not in self.run.idata.posterior]
+        from ..inference.results import has_parameter, summary_names
+        missing = [n for n in summary_names(problem) if not has_parameter(self.run.idata.posterior, n)]
         if missing:
             raise ReportInputError(self.run.run_dir / "posterior.nc",
                                    f"posterior lacks {missing[:5]} that the run's config implies")
@@ -201,16 +193,12 @@ class ReportContext:
     def flight_names(self) -> list[str]:
         return list(self.summary["flights"])
 
-    @cached_property
-    def public_names(self) -> list[str]:
-        """posterior.nc names of θ's components (a sampled ``log_sigma_F`` is stored as ``sigma_F``)."""
-        return [_public_name(n) for n in self.problem.names]
-
     # -- posterior --------------------------------------------------------------------------------------
     def posterior_array(self, names) -> np.ndarray:
-        """(n_chain, n_draw, len(names)) posterior samples of public parameter names."""
+        """(n_chain, n_draw, len(names)) posterior samples of summary.json parameter names."""
+        from ..inference.results import posterior_draws
         post = self.run.idata.posterior
-        return np.stack([np.asarray(post[n].values, float) for n in names], axis=-1)
+        return np.stack([np.asarray(posterior_draws(post, n), float) for n in names], axis=-1)
 
     @cached_property
     def n_samples(self) -> int:
@@ -219,15 +207,15 @@ class ReportContext:
         return int(sizes["chain"] * sizes["draw"])
 
     def theta_at(self, flat_index: np.ndarray) -> np.ndarray:
-        """Posterior samples at flat (chain-major) indices as θ rows (len, dim) in model order (log σ).
+        """Posterior samples at flat (chain-major) indices as θ rows (len, dim) in model order.
 
-        Reads one variable at a time, so a large posterior.nc is never held in memory as a whole."""
+        Reads one parameter at a time, so the posterior is never copied as a whole."""
+        from ..inference.results import posterior_draws
         flat_index = np.asarray(flat_index, int)
         post = self.run.idata.posterior
-        out = np.empty((flat_index.size, len(self.public_names)))
-        for i, (n, pub) in enumerate(zip(self.problem.names, self.public_names)):
-            v = np.asarray(post[pub].values, float).reshape(-1)[flat_index]
-            out[:, i] = np.log(v) if n.startswith("log_sigma_") else v
+        out = np.empty((flat_index.size, self.problem.dim))
+        for i, n in enumerate(self.problem.names):
+            out[:, i] = np.asarray(posterior_draws(post, n), float).reshape(-1)[flat_index]
         return out
 
     @cached_property
@@ -256,10 +244,11 @@ class ReportContext:
     @cached_property
     def _sigma_sel(self) -> np.ndarray:
         """(1 + B, n_flights) noise scales σ [m] of the reference and band draws."""
+        from ..inference.results import posterior_draws
         idx = np.r_[self.ref_index, self.band_indices]
         post = self.run.idata.posterior
-        return np.stack([np.asarray(post[f"sigma_{f.name}"].values, float).reshape(-1)[idx]
-                         for f in self.problem.flights], axis=1)
+        return np.stack([np.asarray(posterior_draws(post, n), float).reshape(-1)[idx]
+                         for n in self.problem.sigma_names], axis=1)
 
     @property
     def theta_ref(self) -> np.ndarray:
@@ -283,9 +272,13 @@ class ReportContext:
 
     @cached_property
     def ensemble_of_chain(self) -> np.ndarray:
-        attrs = self.run.idata.posterior.attrs
-        n_chain = self.run.idata.posterior.sizes["chain"]
-        e = np.asarray(attrs.get("ensemble_of_chain", np.zeros(n_chain, int))).astype(int).reshape(-1)
+        """(n_chain,) independent ensemble of every chain (walker): the ``ensemble`` coordinate of ``chain``
+        (posterior.nc of an older version: its ``ensemble_of_chain`` attribute)."""
+        post = self.run.idata.posterior
+        n_chain = post.sizes["chain"]
+        if "ensemble" in post.coords:
+            return np.asarray(post["ensemble"].values, int)
+        e = np.asarray(post.attrs.get("ensemble_of_chain", np.zeros(n_chain, int))).astype(int).reshape(-1)
         return e if e.size == n_chain else np.zeros(n_chain, int)
 
     # -- simulations ------------------------------------------------------------------------------------

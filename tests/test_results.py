@@ -1,0 +1,202 @@
+"""posterior.nc for ArviZ users: flight dimension, ensemble/walker coordinates, pointwise log-likelihood
+(az.loo, az.compare), posterior predictive; summary.json statistics equal ArviZ's.
+
+The InferenceData is built exactly as `bayes-disc sample` builds it (:func:`build_inference_data`,
+:func:`build_summary`) from short chains of draws around the synthetic truth, with σ drawn from its exact
+conditional: a real sample run takes minutes, these mechanics do not need one."""
+import json
+from pathlib import Path
+
+import arviz as az
+import numpy as np
+import pytest
+
+from bayes_disc.inference.config import load_config
+from bayes_disc.inference.data import build_problem
+from bayes_disc.inference.diagnostics_mcmc import rhat_across
+from bayes_disc.inference.results import (build_inference_data, build_summary, compare_runs, ensemble_view,
+                                          load_posterior, pointwise_log_likelihood, posterior_draws)
+from bayes_disc.inference.sampler import Chains
+from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
+
+CONFIG = """name: {name}
+flights:
+  - file: flights.csv
+markers:
+  "0": [0.100, 0.000, -0.015]
+  "1": [-0.0308, 0.0846, -0.015]
+  "2": [-0.0707, -0.0778, -0.015]
+prior: potts_crowther
+output: out_{name}
+{extra}
+"""
+N_ENS, N_STEPS, N_W = 2, 12, 6
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory):
+    d = tmp_path_factory.mktemp("results")
+    flights = (LaunchSpec(name="a", speed=12.0, launch_angle_deg=4, alpha_deg=8, spin=55, duration=0.3,
+                          noise_mm=1.5, dropout=0.05),
+               LaunchSpec(name="b", speed=10.0, launch_angle_deg=8, alpha_deg=14, spin=-50, duration=0.3,
+                          noise_mm=2.5, dropout=0.0))
+    write_synth(synthesize(SynthSpec(name="s", flights=flights, seed=4)), d / "flights.csv", d / "truth.json")
+    return d
+
+
+def _truth_theta(problem, truth) -> np.ndarray:
+    theta = problem.prior_mean.copy()
+    for i, n in enumerate(problem.names[: problem.n_coef]):
+        theta[i] = truth["coefficients"][n]
+    for k, f in enumerate(problem.flights):
+        s = truth["flights"][f.name]["initial_state"]
+        state = np.concatenate([s["position_m"], s["velocity_m_s"], s["quaternion_wxyz_body_to_world"],
+                                s["omega_body_rad_s"]]).astype(float)
+        theta[problem.ic_slice(k)] = problem.state_to_ic(state, k)
+    return theta
+
+
+def _run(folder: Path, name: str, extra: str = "", seed: int = 0):
+    """(problem, chains, idata, summary) of a short fake run around the truth, written to out_<name>/."""
+    cfg_path = folder / f"{name}.yaml"
+    cfg_path.write_text(CONFIG.format(name=name, extra=extra))
+    problem = build_problem(load_config(cfg_path))
+    rng = np.random.default_rng(seed)
+    theta0 = _truth_theta(problem, json.loads((folder / "truth.json").read_text()))
+    scale = 1e-3 * problem.prior_sd
+    chain = theta0 + scale * rng.standard_normal((N_ENS, N_STEPS, N_W, problem.dim))
+    flat = chain.reshape(-1, problem.dim)
+    ss = problem.sum_squares(flat)
+    assert np.all(np.isfinite(ss))
+    sigma = problem.draw_sigma(ss, rng).reshape(N_ENS, N_STEPS, N_W, -1)
+    lp = problem.log_prob(flat).reshape(N_ENS, N_STEPS, N_W)
+    chains = Chains(chain=chain, log_prob=lp, sigma=sigma, acceptance=np.full((N_ENS, N_W), 0.3), burn=0,
+                    total_steps=N_STEPS, tau=np.ones((N_ENS, problem.dim)), converged=False, reason="test")
+    idata = build_inference_data(problem, chains, np.random.default_rng(seed), n_prior=50,
+                                 n_log_likelihood=N_ENS * N_W * 6, n_predictive=N_ENS * N_W * 2)
+    summary = build_summary(problem, chains, idata, {}, {"name": name})
+    out = folder / f"out_{name}"
+    out.mkdir(exist_ok=True)
+    idata.to_netcdf(str(out / "posterior.nc"))
+    (out / "summary.json").write_text(json.dumps(summary))
+    return problem, chains, idata, summary
+
+
+@pytest.fixture(scope="module")
+def base(folder):
+    return _run(folder, "base")
+
+
+@pytest.fixture(scope="module")
+def side(folder):
+    return _run(folder, "side", "physics: {side_force: {CY: 0.0}}", seed=1)
+
+
+def test_posterior_has_flight_dimension_and_ensemble_walker_coords(base, folder):
+    problem, chains, idata, summary = base
+    post = load_posterior(folder / "out_base" / "posterior.nc").posterior
+    assert list(post["flight"].values) == ["a", "b"]
+    for n in ("x", "vz", "th1", "wz", "sigma"):
+        assert post[n].dims == ("chain", "draw", "flight")
+    assert post["sigma"].attrs["units"] == "m" and post["vx"].attrs["units"] == "m/s"
+    assert not any(v.startswith("sigma_") or v.endswith("_a") for v in post.data_vars)
+    np.testing.assert_array_equal(post["ensemble"].values, np.repeat(np.arange(N_ENS), N_W))
+    np.testing.assert_array_equal(post["walker"].values, np.tile(np.arange(N_W), N_ENS))
+    # chain c = walker w of ensemble e holds exactly that walker's steps
+    k = problem.names.index("vz_b")
+    np.testing.assert_array_equal(post["vz"].sel(flight="b").values[N_W + 2], chains.chain[1, :, 2, k])
+    np.testing.assert_array_equal(posterior_draws(post, "sigma_a")[3], chains.sigma[0, :, 3, 0])
+    # summary.json keeps SPEC §6's flat names, read back from the flight dimension
+    for n in problem.names + problem.sigma_names:
+        assert summary["parameters"][n]["mean"] == pytest.approx(posterior_draws(post, n).mean(), rel=1e-12)
+
+
+def test_summary_statistics_are_arviz_summary_and_r_hat_across_ensembles(base):
+    problem, chains, idata, summary = base
+    table = az.summary(idata, round_to="none")
+    p = summary["parameters"]
+    for name, label in (("CLa", "CLa"), ("wz_a", "wz[a]"), ("sigma_b", "sigma[b]")):
+        row = table.loc[label]
+        for key in ("ess_bulk", "ess_tail", "mcse_mean", "mcse_sd"):
+            assert p[name][key] == pytest.approx(row[key], rel=1e-12), (name, key)
+        assert p[name]["r_hat_walkers"] == pytest.approx(row["r_hat"], rel=1e-12)
+    # r_hat: the sampler's statistic across ensembles, reproducible from posterior.nc alone
+    theta_rh = rhat_across(chains.chain)
+    across = az.rhat(ensemble_view(idata.posterior))
+    for i, name in enumerate(problem.names):
+        assert p[name]["r_hat"] == pytest.approx(theta_rh[i], rel=1e-12)
+    assert p["CMq"]["r_hat"] == pytest.approx(float(across["CMq"]), rel=1e-12)
+    assert p["x_b"]["r_hat"] == pytest.approx(float(across["x"].sel(flight="b")), rel=1e-12)
+    assert summary["convergence"]["r_hat_max"] == max(v["r_hat"] for v in p.values())
+
+
+def test_pointwise_log_likelihood_sums_to_the_conditional_likelihood(base):
+    problem, chains, idata, _ = base
+    theta = chains.chain[0, :3, 0]
+    sigma = chains.sigma[0, :3, 0]
+    ll, _ = pointwise_log_likelihood(problem, theta, sigma)
+    ss = problem.sum_squares(theta)
+    start = 0
+    for k, f in enumerate(problem.flights):
+        n_points = int(f.observed.sum())
+        n = 3 * n_points
+        expected = -0.5 * n * np.log(2 * np.pi * sigma[:, k] ** 2) - ss[:, k] / (2 * sigma[:, k] ** 2)
+        np.testing.assert_allclose(ll[:, start: start + n_points].sum(axis=1), expected, rtol=1e-10)
+        start += n_points
+    assert start == ll.shape[1]
+    # the stored group: every observed point of both flights, labelled, float32 copies of the same values
+    g = idata.log_likelihood
+    assert g["markers"].sizes["point"] == ll.shape[1]
+    assert sorted(set(g["point_flight"].values)) == ["a", "b"]
+    assert g["markers"].dtype == np.float32 and np.all(np.isfinite(g["markers"].values))
+
+
+def test_posterior_predictive_has_observed_dims_and_the_drawn_noise(base):
+    problem, chains, idata, _ = base
+    pp, obs = idata.posterior_predictive, idata.observed_data
+    assert set(pp.data_vars) == set(obs.data_vars)
+    for k, f in enumerate(problem.flights):
+        key = f"markers_{f.name}"
+        assert pp[key].dims[2:] == obs[key].dims and pp[key].shape[2:] == obs[key].shape
+        y = pp[key].values[:, :, f.observed]
+        r = y - f.positions[f.observed]
+        # predictive − observed = (model error ≈ noise at the truth) + fresh noise: RMS ≈ √2 σ
+        ratio = np.sqrt(np.mean(r ** 2)) / np.median(chains.sigma[..., k])
+        assert 1.2 < ratio < 1.65, (f.name, ratio)
+
+
+def test_loo_and_compare_on_two_runs(base, side, folder):
+    loo_base = az.loo(load_posterior(folder / "out_base" / "posterior.nc"))
+    loo_side = az.loo(load_posterior(folder / "out_side" / "posterior.nc"))
+    n_points = base[2].log_likelihood.sizes["point"]
+    assert loo_base.n_data_points == n_points and np.isfinite(loo_base.elpd_loo)
+    table = compare_runs([folder / "out_base", folder / "out_side"])
+    assert list(table.index) != [] and set(table.index) == {"out_base", "out_side"}
+    assert table.loc["out_base", "elpd_loo"] == pytest.approx(loo_base.elpd_loo)
+    assert table.loc["out_side", "elpd_loo"] == pytest.approx(loo_side.elpd_loo)
+    assert table["rank"].min() == 0 and table["weight"].sum() == pytest.approx(1.0)
+
+
+def test_compare_refuses_runs_of_different_observations(base, folder, tmp_path):
+    idata = load_posterior(folder / "out_base" / "posterior.nc")
+    ll = idata.log_likelihood
+    idata.log_likelihood = ll.assign_coords(point_time=("point", ll["point_time"].values + 0.01))
+    (tmp_path / "other").mkdir()
+    idata.to_netcdf(str(tmp_path / "other" / "posterior.nc"))
+    with pytest.raises(ValueError, match="observed marker points differ"):
+        compare_runs({"base": folder / "out_base", "other": tmp_path / "other"})
+    with pytest.raises(ValueError, match="at least two"):
+        compare_runs([folder / "out_base"])
+
+
+def test_reader_handles_the_older_layout_and_names_missing_parameters(base):
+    import xarray as xr
+    post = base[2].posterior
+    old = xr.Dataset({"CLa": post["CLa"], "sigma_a": post["sigma"].sel(flight="a", drop=True),
+                      "x_b": post["x"].sel(flight="b", drop=True)}).drop_vars(["ensemble", "walker"])
+    np.testing.assert_array_equal(posterior_draws(old, "sigma_a"), posterior_draws(post, "sigma_a"))
+    np.testing.assert_array_equal(posterior_draws(old, "x_b"), posterior_draws(post, "x_b"))
+    with pytest.raises(KeyError, match="sigma_c"):
+        posterior_draws(post, "sigma_c")
+    with pytest.raises(KeyError, match="ensemble"):
+        ensemble_view(old)
