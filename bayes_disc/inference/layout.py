@@ -1,12 +1,21 @@
 """The parameter layout: the one place that knows what every entry of θ is.
 
 θ = [ the ten coefficients (SPEC §2) |
-      extension: physics-term parameters, then data-explanation parameters (shared by all flights) |
-      per flight f: initial conditions (12), then the flight's observation-model parameters ]
+      extension: physics-term parameters, data-explanation parameters, then the parameters the
+      observation models share across flights (e.g. the logger's position) |
+      per flight f: initial conditions, then the flight's own observation-model parameters ]
 
-Initial conditions of a flight: position x, y, z [m], velocity vx, vy, vz [m/s] (world), attitude
-th1, th2, th3 [rad] (rotation vector relative to the data-derived start: q = q_ref ⊗ exp(ϑ)), body angular
-velocity wx, wy, wz [rad/s]. Public names append ``_<flight>``.
+Initial conditions (:class:`InitialConditions`) come in two kinds:
+
+* ``full`` (flights with marker positions): position x, y, z [m], velocity vx, vy, vz [m/s] (world),
+  attitude th1, th2, th3 [rad] (rotation vector relative to the data-derived start: q = q_ref ⊗ exp(ϑ)),
+  body angular velocity wx, wy, wz [rad/s];
+* ``inertial`` (flights seen by an inertial logger only: position and heading are unobservable and are
+  not parameters): tilt1, tilt2 [rad] (the attitude R = exp([tilt1, tilt2, 0]×) R_level, R_level the
+  level right-side-up disc with b1 along x), the air-relative velocity in body axes u1, u2, u3 [m/s]
+  (v = R u; u3 > 0 is air meeting the underside), body angular velocity wx, wy, wz [rad/s].
+
+Public names append ``_<flight>``.
 """
 from __future__ import annotations
 
@@ -18,7 +27,27 @@ from ..physics import COEFFICIENT_NAMES, COEFFICIENT_UNITS, Term, TermParameter
 
 IC_NAMES = ("x", "y", "z", "vx", "vy", "vz", "th1", "th2", "th3", "wx", "wy", "wz")
 IC_UNITS = ("m", "m", "m", "m/s", "m/s", "m/s", "rad", "rad", "rad", "rad/s", "rad/s", "rad/s")
-N_IC = len(IC_NAMES)
+
+
+@dataclass(frozen=True)
+class InitialConditions:
+    """A kind of initial-condition parameters: names, units and prior scales (module docstring)."""
+
+    kind: str
+    names: tuple[str, ...]
+    units: tuple[str, ...]
+    prior_sd: tuple[float, ...]
+
+    @property
+    def size(self) -> int:
+        return len(self.names)
+
+
+FULL_IC = InitialConditions("full", IC_NAMES, IC_UNITS, (0.5,) * 3 + (5.0,) * 3 + (0.5,) * 3 + (30.0,) * 3)
+INERTIAL_IC = InitialConditions("inertial", ("tilt1", "tilt2", "u1", "u2", "u3", "wx", "wy", "wz"),
+                                ("rad", "rad", "m/s", "m/s", "m/s", "rad/s", "rad/s", "rad/s"),
+                                (0.5, 0.5, 8.0, 8.0, 4.0, 30.0, 30.0, 30.0))
+N_IC = FULL_IC.size
 
 
 @dataclass(frozen=True)
@@ -35,23 +64,31 @@ class ParameterLayout:
         The flights, in θ order.
     flight_parameters : tuple of tuple of TermParameter
         Each flight's own observation-model parameters (appended after its initial conditions).
+    observation_parameters : tuple of TermParameter
+        Observation-model parameters shared by all flights (after the explanations).
+    flight_ic : tuple of InitialConditions
+        Each flight's kind of initial conditions (default: all ``full``).
     """
 
     terms: tuple[Term, ...] = ()
     explanation_parameters: tuple[TermParameter, ...] = ()
     flight_names: tuple[str, ...] = ()
     flight_parameters: tuple[tuple[TermParameter, ...], ...] = ()
+    observation_parameters: tuple[TermParameter, ...] = ()
+    flight_ic: tuple[InitialConditions, ...] = ()
     _flight_start: tuple[int, ...] = field(init=False, repr=False)
 
     def __post_init__(self):
         if not self.flight_parameters:
             object.__setattr__(self, "flight_parameters", tuple(() for _ in self.flight_names))
-        if len(self.flight_parameters) != len(self.flight_names):
-            raise ValueError("flight_parameters needs one entry per flight")
+        if not self.flight_ic:
+            object.__setattr__(self, "flight_ic", tuple(FULL_IC for _ in self.flight_names))
+        if len(self.flight_parameters) != len(self.flight_names) or len(self.flight_ic) != len(self.flight_names):
+            raise ValueError("flight_parameters and flight_ic need one entry per flight")
         starts, j = [], self.ic_start
-        for own in self.flight_parameters:
+        for ic, own in zip(self.flight_ic, self.flight_parameters):
             starts.append(j)
-            j += N_IC + len(own)
+            j += ic.size + len(own)
         object.__setattr__(self, "_flight_start", tuple(starts) + (j,))
 
     # -- sizes --------------------------------------------------------------------------------------------
@@ -69,8 +106,8 @@ class ParameterLayout:
 
     @property
     def ext_parameters(self) -> tuple[TermParameter, ...]:
-        """Every parameter of the extension block (terms, then explanations), in θ order."""
-        return self.term_parameters + self.explanation_parameters
+        """Every parameter of the extension block (terms, explanations, shared observation parameters)."""
+        return self.term_parameters + self.explanation_parameters + self.observation_parameters
 
     @property
     def n_ext(self) -> int:
@@ -104,18 +141,24 @@ class ParameterLayout:
 
     @property
     def explanation_slice(self) -> slice:
-        return slice(self.n_coef + self.n_phys, self.ic_start)
+        start = self.n_coef + self.n_phys
+        return slice(start, start + len(self.explanation_parameters))
+
+    @property
+    def observation_slice(self) -> slice:
+        """The observation models' shared parameters."""
+        return slice(self.explanation_slice.stop, self.ic_start)
 
     def flight_slice(self, k: int) -> slice:
         """All of flight k's own entries (initial conditions, then observation-model parameters)."""
         return slice(self._flight_start[k], self._flight_start[k + 1])
 
     def ic_slice(self, k: int) -> slice:
-        return slice(self._flight_start[k], self._flight_start[k] + N_IC)
+        return slice(self._flight_start[k], self._flight_start[k] + self.flight_ic[k].size)
 
     def own_slice(self, k: int) -> slice:
         """Flight k's observation-model parameters."""
-        return slice(self._flight_start[k] + N_IC, self._flight_start[k + 1])
+        return slice(self._flight_start[k] + self.flight_ic[k].size, self._flight_start[k + 1])
 
     def flight_columns(self, k: int) -> np.ndarray:
         """Indices of θ that flight k's predictions depend on (shared entries and its own)."""
@@ -130,15 +173,15 @@ class ParameterLayout:
     @property
     def names(self) -> list[str]:
         out = list(COEFFICIENT_NAMES) + self.ext_names
-        for f, own in zip(self.flight_names, self.flight_parameters):
-            out += [f"{n}_{f}" for n in IC_NAMES] + [f"{p.name}_{f}" for p in own]
+        for f, ic, own in zip(self.flight_names, self.flight_ic, self.flight_parameters):
+            out += [f"{n}_{f}" for n in ic.names] + [f"{p.name}_{f}" for p in own]
         return out
 
     @property
     def units(self) -> list[str]:
         out = [COEFFICIENT_UNITS[n] for n in COEFFICIENT_NAMES] + [p.unit for p in self.ext_parameters]
-        for own in self.flight_parameters:
-            out += list(IC_UNITS) + [p.unit for p in own]
+        for ic, own in zip(self.flight_ic, self.flight_parameters):
+            out += list(ic.units) + [p.unit for p in own]
         return out
 
     def index(self, name: str) -> int:

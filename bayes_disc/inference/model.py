@@ -24,9 +24,15 @@ from ..observation.explanations import DataExplanation
 from ..observation.markers import FlightObservation
 from ..observation.models import MarkerPositions, ObservationModel
 from ..physics import COEFFICIENT_NAMES, Disc, Environment, SimulatorSettings, Term, flight_conditions, simulate
-from ..physics.frames import quat_from_rotvec, quat_multiply, quat_to_rotvec
-from .layout import IC_NAMES, ParameterLayout
-from .priors import IC_SD, coefficient_prior
+from ..physics.frames import matrix_to_quat, quat_from_rotvec, quat_multiply, quat_to_matrix, quat_to_rotvec
+from .layout import FULL_IC, IC_NAMES, INERTIAL_IC, ParameterLayout
+from .priors import coefficient_prior
+
+#: body→world rotation of the level right-side-up disc (b1 along x, b3 down): the inertial ICs' reference
+R_LEVEL = np.diag([1.0, -1.0, -1.0])
+#: release height [m] of flights seen by an inertial logger only (unobservable; matters only with terms
+#: that depend on height)
+INERTIAL_RELEASE_HEIGHT = 1.0
 
 __all__ = ["Problem", "IC_NAMES"]
 
@@ -37,8 +43,9 @@ class Problem:
 
     Parameters
     ----------
-    flights : list of FlightObservation
-        Marker recordings, one per flight (sample times (n,) [s], positions (n, m, 3) [m]).
+    flights : list
+        One record per flight with a ``name``: marker recordings (:class:`FlightObservation`, sample times
+        (n,) [s], positions (n, m, 3) [m]) or any other data record when ``observations`` are given.
     marker_body : (m, 3) array
         Configured body-frame marker positions [m].
     disc, env : Disc, Environment
@@ -61,8 +68,9 @@ class Problem:
         If set, a superset of ``terms`` to integrate with (absent ones off): one compiled kernel then
         serves many models (missing-physics search).
     observations : list of tuple of ObservationModel, optional
-        Per flight, its observation models (every one predicts from the flight's simulation on the
-        flight's sample times); default: one :class:`MarkerPositions` per flight, with the explanations.
+        Per flight, its observation models (each predicts from the flight simulated on its own grid
+        ``times``); default: one :class:`MarkerPositions` per flight, with the explanations. A flight with
+        no marker model gets the ``inertial`` initial conditions (:mod:`.layout`).
     """
 
     flights: list[FlightObservation]
@@ -82,18 +90,26 @@ class Problem:
     def __post_init__(self):
         if len(self.start_states) != len(self.flights):
             raise ValueError(f"{len(self.flights)} flights but {len(self.start_states)} start states")
-        self.marker_ids = tuple(self.flights[0].marker_ids) if self.flights else ()
         if self.observations is None:
             self.observations = [(MarkerPositions(f, self.marker_body, tuple(self.explanations)),)
                                  for f in self.flights]
         if len(self.observations) != len(self.flights) or not all(self.observations):
             raise ValueError("observations needs at least one observation model per flight")
         self.channels: list[tuple[ObservationModel, ...]] = [tuple(ch) for ch in self.observations]
+        markers = [c for ch in self.channels for c in ch if isinstance(c, MarkerPositions)]
+        self.marker_ids = tuple(markers[0].data.marker_ids) if markers else ()
         expl = tuple(p for e in self.explanations for p in e.parameters_for(self.marker_ids))
-        self.layout = ParameterLayout(terms=tuple(self.terms), explanation_parameters=expl,
-                                      flight_names=tuple(f.name for f in self.flights),
-                                      flight_parameters=tuple(tuple(p for c in ch for p in c.parameters)
-                                                              for ch in self.channels))
+        shared: dict[str, tuple] = {}          # observation-model id -> its shared parameters (once per model)
+        for ch in self.channels:
+            for c in ch:
+                shared.setdefault(c.id, tuple(c.shared_parameters))
+        self.layout = ParameterLayout(
+            terms=tuple(self.terms), explanation_parameters=expl,
+            observation_parameters=tuple(p for ps in shared.values() for p in ps),
+            flight_names=tuple(f.name for f in self.flights),
+            flight_parameters=tuple(tuple(p for c in ch for p in c.parameters) for ch in self.channels),
+            flight_ic=tuple(FULL_IC if any(isinstance(c, MarkerPositions) for c in ch) else INERTIAL_IC
+                            for ch in self.channels))
         L = self.layout
         self.n_coef, self.n_phys, self.n_ext = L.n_coef, L.n_phys, L.n_ext
         self.n_flights, self.ic_start, self.dim = L.n_flights, L.ic_start, L.dim
@@ -104,6 +120,20 @@ class Problem:
         if self.rates is None:
             self.rates = [self.flight_rate(s) for s in self.start_states]
         self.q_ref = [s[6:10] / np.linalg.norm(s[6:10]) for s in self.start_states]
+        # θ columns each channel reads besides the flight's ICs: its shared parameters, then its own
+        offsets, j = {}, L.observation_slice.start
+        for mid, ps in shared.items():
+            offsets[mid] = np.arange(j, j + len(ps))
+            j += len(ps)
+        expl_cols = np.arange(L.explanation_slice.start, L.explanation_slice.stop)
+        self._columns = []
+        for k, ch in enumerate(self.channels):
+            per, o = [], L.own_slice(k).start
+            for c in ch:
+                base = expl_cols if isinstance(c, MarkerPositions) else np.zeros(0, np.intp)
+                per.append(np.r_[base, offsets[c.id], np.arange(o, o + len(c.parameters))].astype(np.intp))
+                o += len(c.parameters)
+            self._columns.append(per)
         # noise groups: every channel's, in flight order; _groups[k][c] = slice of channel c of flight k
         self.noise_names, self._groups, sizes, g = [], [], [], 0
         for ch in self.channels:
@@ -169,7 +199,7 @@ class Problem:
                        disc=self.disc, env=self.env, prior_name=self.prior_name, terms=self.terms,
                        explanations=self.explanations, start_states=[self.start_states[k]],
                        term_start=self.term_start, settings=self.settings, rates=[self.rates[k]],
-                       kernel_terms=self.kernel_terms)
+                       kernel_terms=self.kernel_terms, observations=None if flight is not None else [self.channels[k]])
 
     def start_vector(self) -> np.ndarray:
         """(dim,) prior means with the extension parameters at their starting values."""
@@ -187,10 +217,9 @@ class Problem:
             mean[i], sd[i] = cp.mean[n], cp.sd[n]
         for j, p in enumerate(L.ext_parameters, start=self.n_coef):
             mean[j], sd[j] = p.off_value, p.prior_sd
-        ic_sd = np.repeat([IC_SD["position"], IC_SD["velocity"], IC_SD["attitude"], IC_SD["omega"]], 3)
         for k in range(self.n_flights):
             mean[L.ic_slice(k)] = self.state_to_ic(self.start_states[k], k)
-            sd[L.ic_slice(k)] = ic_sd
+            sd[L.ic_slice(k)] = L.flight_ic[k].prior_sd
             own = L.own_slice(k)
             mean[own] = [p.off_value for p in L.flight_parameters[k]]
             sd[own] = [p.prior_sd for p in L.flight_parameters[k]]
@@ -206,13 +235,28 @@ class Problem:
 
     # -- states -----------------------------------------------------------------------------------------
     def ic_to_state(self, ic: np.ndarray, k: int) -> np.ndarray:
-        """(B, 12) initial-condition parameters of flight k → (B, 13) states."""
+        """(B, n_ic) initial-condition parameters of flight k → (B, 13) states (:mod:`.layout`)."""
         ic = np.atleast_2d(ic)
+        if self.layout.flight_ic[k] is INERTIAL_IC:
+            tilt = np.concatenate([ic[:, 0:2], np.zeros((ic.shape[0], 1))], axis=1)
+            R = quat_to_matrix(quat_from_rotvec(tilt)) @ R_LEVEL
+            v = np.einsum("bij,bj->bi", R, ic[:, 2:5])
+            x = np.broadcast_to([0.0, 0.0, INERTIAL_RELEASE_HEIGHT], v.shape)
+            return np.concatenate([x, v, matrix_to_quat(R), ic[:, 5:8]], axis=1)
         q = quat_multiply(self.q_ref[k], quat_from_rotvec(ic[:, 6:9]))
         return np.concatenate([ic[:, :6], q, ic[:, 9:12]], axis=1)
 
     def state_to_ic(self, state: np.ndarray, k: int) -> np.ndarray:
-        """(13,) state of flight k → (12,) initial-condition parameters."""
+        """(13,) state of flight k → its initial-condition parameters (for ``inertial`` flights the state
+        is first turned about the vertical so that R = exp([tilt1, tilt2, 0]×) R_level)."""
+        if self.layout.flight_ic[k] is INERTIAL_IC:
+            R = quat_to_matrix(state[6:10])
+            M = R @ R_LEVEL.T
+            psi = np.arctan2(M[1, 0] - M[0, 1], M[0, 0] + M[1, 1])
+            c, s = np.cos(psi), np.sin(psi)
+            T = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]) @ M
+            tilt = quat_to_rotvec(matrix_to_quat(T))[:2]
+            return np.concatenate([tilt, R.T @ state[3:6], state[10:13]])
         qr = self.q_ref[k] * np.array([1, -1, -1, -1])
         rel = quat_multiply(qr, state[6:10])
         return np.concatenate([state[:6], quat_to_rotvec(rel), state[10:13]])
@@ -223,9 +267,9 @@ class Problem:
         tr = self.simulate(theta, k, want_states=False)
         return tr.markers, tr.ok
 
-    def _run(self, theta: np.ndarray, k: int, want_states: bool):
-        """The simulator's raw Trajectories of flight k on its sample times."""
-        f = self.flights[k]
+    def _run(self, theta: np.ndarray, k: int, want_states: bool, times: np.ndarray | None = None):
+        """The simulator's raw Trajectories of flight k on ``times`` (default: its first channel's grid)."""
+        times = self.channels[k][0].times if times is None else times
         states = self.ic_to_state(theta[:, self.ic_slice(k)], k)
         terms, ext = self.terms, (theta[:, self.layout.term_slice] if self.n_phys else None)
         if self.kernel_terms:
@@ -233,26 +277,31 @@ class Problem:
         settings = SimulatorSettings(method=self.settings.method, step_factor=self.settings.step_factor,
                                      omega_cap=self.settings.omega_cap, speed_cap=self.settings.speed_cap,
                                      fixed_rate=self.rates[k])
-        need = want_states or any(c.needs_states for c in self.channels[k])
-        return simulate(states, theta[:, : self.n_coef], f.times, t0=f.times[0], disc=self.disc, env=self.env,
+        need = want_states or any(c.needs_states for c in self.channels[k] if c.times is times)
+        return simulate(states, theta[:, : self.n_coef], times, t0=times[0], disc=self.disc, env=self.env,
                         marker_body=self.marker_body, terms=terms, extension=ext, settings=settings,
                         want_states=need)
 
-    def _extra(self, theta: np.ndarray, k: int) -> np.ndarray | None:
-        """Values (B, k) of flight k's explanation and own observation-model parameters."""
-        cols = np.r_[np.arange(self.layout.explanation_slice.start, self.layout.explanation_slice.stop),
-                     np.arange(self.layout.own_slice(k).start, self.layout.own_slice(k).stop)]
-        return theta[:, cols] if cols.size else None
+    def _channel_predictions(self, theta: np.ndarray, k: int):
+        """[(channel, prediction)] of flight k and the ok flags (B,): one simulation per distinct grid."""
+        runs, out, ok = {}, [], np.ones(theta.shape[0], bool)
+        for c, cols in zip(self.channels[k], self._columns[k]):
+            key = id(c.times)
+            if key not in runs:
+                runs[key] = self._run(theta, k, want_states=False, times=c.times)
+                ok &= runs[key].ok
+            out.append((c, c.predict(runs[key], theta[:, cols] if cols.size else None)))
+        return out, ok
 
     def simulate(self, theta: np.ndarray, k: int, want_states: bool = True):
         """The simulator's :class:`~bayes_disc.physics.simulator.Trajectories` of flight k for θ (B, dim)
-        on the flight's sample times (markers as the marker model predicts them, explanations included)."""
+        on its first channel's grid (for marker flights the sample times; markers as the marker model
+        predicts them, explanations included)."""
         from dataclasses import replace
         theta = np.atleast_2d(theta)
         tr = self._run(theta, k, want_states)
-        if self.explanations:
-            marker_model = next(c for c in self.channels[k] if isinstance(c, MarkerPositions))
-            tr = replace(tr, markers=marker_model.predict(tr, self._extra(theta, k)))
+        if self.explanations and isinstance(self.channels[k][0], MarkerPositions):
+            tr = replace(tr, markers=self.channels[k][0].predict(tr, theta[:, self._columns[k][0]]))
         if not want_states and tr.states is not None:
             tr = replace(tr, states=None)
         return tr
@@ -261,27 +310,25 @@ class Problem:
         """Air-relative flight conditions (:class:`~bayes_disc.physics.FlightConditions`: v_a, air speed, D
         frame, α, p, q, r) of flight k along ``states`` ((n, 13) or (B, n, 13)) for θ ((dim,) or (B, dim)):
         the model's wind terms included."""
-        return flight_conditions(states, self.flights[k].times, self.terms, theta[..., self.layout.term_slice])
+        return flight_conditions(states, self.channels[k][0].times, self.terms, theta[..., self.layout.term_slice])
 
     def residuals(self, theta: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Residuals (B, n_res_k) (predicted − measured, every channel of flight k; markers in m) and ok
-        flags (B,)."""
+        """Residuals (B, n_res_k) (predicted − measured, every channel of flight k, each in its data's
+        unit) and ok flags (B,)."""
         theta = np.atleast_2d(theta)
-        tr = self._run(theta, k, want_states=False)
-        extra = self._extra(theta, k)
-        parts = [c.residuals(c.predict(tr, extra)) for c in self.channels[k]]
-        return (parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)), tr.ok
+        preds, ok = self._channel_predictions(theta, k)
+        parts = [c.residuals(p) for c, p in preds]
+        return (parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)), ok
 
     def sum_squares(self, theta: np.ndarray) -> np.ndarray:
         """S_g (B, n_groups): summed squared residuals per noise group; inf where a lane failed."""
         theta = np.atleast_2d(theta)
         out = np.empty((theta.shape[0], self.n_groups))
         for k in range(self.n_flights):
-            tr = self._run(theta, k, want_states=False)
-            extra = self._extra(theta, k)
-            for c, g in zip(self.channels[k], self._groups[k]):
-                ss = c.sum_squares(c.residuals(c.predict(tr, extra)))
-                out[:, g] = np.where(tr.ok[:, None] & np.isfinite(ss), ss, np.inf)
+            preds, ok = self._channel_predictions(theta, k)
+            for (c, p), g in zip(preds, self._groups[k]):
+                ss = c.sum_squares(c.residuals(p))
+                out[:, g] = np.where(ok[:, None] & np.isfinite(ss), ss, np.inf)
         return out
 
     def log_likelihood_from_ss(self, ss: np.ndarray) -> np.ndarray:

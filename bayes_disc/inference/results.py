@@ -35,7 +35,8 @@ import numpy as np
 import xarray as xr
 
 from ..physics import COEFFICIENT_NAMES, LITERATURE
-from .model import IC_NAMES, IC_UNITS, Problem
+from .layout import IC_NAMES, IC_UNITS
+from .model import Problem
 from .priors import coefficient_prior
 from .sampler import Chains
 

@@ -10,7 +10,8 @@ vectors whose simulated trajectories are given:
   with each σ_g integrated out under its Jeffreys prior p(σ_g) ∝ 1/σ_g (:func:`gaussian_marginal_loglik`);
 * ``draw_noise(ss, rng)``: σ_g drawn exactly from σ_g² | θ, y ~ S_g / χ²_{n_g}.
 
-It also names its noise groups (``noise_names``, the public names of the σ_g), the data explanations it
+``times`` is the grid (s, starting at the flight's release or first sample) on which the flight must be
+simulated for this model. It also names its noise groups (``noise_names``, the public names of the σ_g), the data explanations it
 applies (``explanation_ids``: their parameters are shared by every flight and sit in the parameter
 layout's extension block) and its own per-flight parameters (``parameters``: names, units, off values and
 prior scales; none for markers). ``needs_states`` tells the simulator whether full states are required.
@@ -62,6 +63,12 @@ class ObservationModel(ABC):
     @property
     def parameters(self) -> tuple[TermParameter, ...]:
         """This flight's own parameters of the model (appended to the flight's initial conditions)."""
+        return ()
+
+    @property
+    def shared_parameters(self) -> tuple[TermParameter, ...]:
+        """Parameters of the model shared by every flight it observes (e.g. where a logger sits); they
+        appear once in the parameter layout's extension block."""
         return ()
 
     @property

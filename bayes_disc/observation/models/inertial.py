@@ -1,0 +1,262 @@
+"""Inertial (IMU) recordings of one throw: gyroscope and low-pass-filtered accelerometer.
+
+A logger fixed in the disc measures, in its sensor axes s (tilted from the body axes B by the small
+rotation C = exp(−[ε]×), ε = (ε1, ε2, 0) [rad]; sensor +z along b3):
+
+    gyro:  ω_s(t) = C ω_B(t) + b_g                                                      [rad/s]
+    acc:   f_B(t) = Rᵀ (dv/dt + g ẑ) + dω_B/dt × r_s + ω_B × (ω_B × r_s)                 [m/s²]
+           τ dy/dt = C f_B(t) − y,   y(0) = y_0                                           (on-chip LPF)
+           a_s(t) = y(t) + b_a
+
+with v the centre-of-mass velocity (world), R the body→world rotation, r_s the sensor position in B
+relative to the centre of mass [m], τ the accelerometer filter's time constant [s], y_0 the filter state at
+release (the hand was still accelerating the disc), b_g, b_a biases. The specific force f_B is what the
+aerodynamic (and any extra-term) force does per unit mass plus the rotational terms at r_s; in flight the
+centripetal term dominates (≈ 6 g at r = 55 rad/s, |r_s| = 2 cm).
+
+A log without time column (``flatball-ins``) is sampled at t_i = (row_i − row_0) P with the row period P
+[s] unknown (``imu_period_<flight>``); an ``imu-csv`` log gives t_i. The simulation runs on a fixed fine
+grid (four points per nominal row); dv/dt and dω_B/dt come from fourth-order finite differences of the
+simulated states (exact for any extra physics term), the filter is integrated exactly for inputs linear
+between grid points, and the outputs are interpolated (cubic Lagrange) at each parameter vector's own
+sample times.
+
+Noise: four groups per throw, each with its own scale (Jeffreys prior, integrated out): gyro axial (z),
+gyro transverse (x, y), acc axial (z), acc transverse (x, y) — the axial gyro noise of these loggers is an
+order of magnitude below the transverse one.
+
+Parameters — shared by the run's throws (one logger, one mount): ``imu_offset_x, imu_offset_y,
+imu_offset_z`` (r_s, m), ``imu_lpf_tau`` (s), ``imu_tilt_1, imu_tilt_2`` (ε, rad); per throw:
+``imu_period`` (s, logs without time column), ``gyro_bias_x…z`` (rad/s), ``acc_bias_x…z`` (m/s²),
+``lpf_state_x…z`` (y_0, m/s²).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numba as nb
+import numpy as np
+
+from ...physics import TermParameter
+from ...physics.frames import quat_from_rotvec, quat_to_matrix
+from ..imu.formats import InertialLog
+from .base import ObservationModel
+
+#: fine simulation points per nominal row period
+OVERSAMPLE = 4
+#: longest row period [s] a parameter vector may take, as a multiple of the nominal one (grid length)
+PERIOD_SPAN = 1.35
+
+SHARED_PARAMETERS = (
+    TermParameter("imu_offset_x", "m", "sensor position r_s along b1 (from the centre of mass)", 0.0, 0.05),
+    TermParameter("imu_offset_y", "m", "sensor position r_s along b2", 0.0, 0.05),
+    TermParameter("imu_offset_z", "m", "sensor position r_s along b3", 0.0, 0.02),
+    TermParameter("imu_lpf_tau", "s", "accelerometer low-pass filter time constant τ", 0.1, 0.1),
+    TermParameter("imu_tilt_1", "rad", "sensor tilt from the body axes about b1", 0.0, 0.05),
+    TermParameter("imu_tilt_2", "rad", "sensor tilt from the body axes about b2", 0.0, 0.05),
+)
+GROUPS = ("gyro_axial", "gyro_transverse", "acc_axial", "acc_transverse")
+
+
+@nb.njit(cache=True)
+def low_pass(x, y0, tau, h):
+    """First-order filter τ dy/dt = x − y on a uniform grid, exact for x linear between points.
+
+    Parameters
+    ----------
+    x : (B, J, 3) array
+        Filter input on the grid [unit].
+    y0 : (B, 3) array
+        State at the first grid point.
+    tau : (B,) array
+        Time constants [s] (> 0).
+    h : float
+        Grid step [s].
+
+    Returns
+    -------
+    (B, J, 3) array
+        Filter output y_j = α y_{j−1} + (1 − α) x_{j−1} + (x_j − x_{j−1})(1 − τ(1 − α)/h), α = e^{−h/τ}.
+    """
+    B, J, _ = x.shape
+    out = np.empty_like(x)
+    for b in range(B):
+        a = np.exp(-h / tau[b])
+        k = 1.0 - tau[b] * (1.0 - a) / h
+        for c in range(3):
+            y = y0[b, c]
+            out[b, 0, c] = y
+            for j in range(1, J):
+                y = a * y + (1.0 - a) * x[b, j - 1, c] + (x[b, j, c] - x[b, j - 1, c]) * k
+                out[b, j, c] = y
+    return out
+
+
+def fd_derivative(f: np.ndarray, h: float) -> np.ndarray:
+    """Fourth-order finite-difference derivative along axis 1 of f (B, J, k) on a uniform grid h [s]
+    (one-sided fourth-order stencils at both ends)."""
+    d = np.empty_like(f)
+    d[:, 2:-2] = (f[:, :-4] - 8 * f[:, 1:-3] + 8 * f[:, 3:-1] - f[:, 4:]) / (12 * h)
+    d[:, 0] = (-25 * f[:, 0] + 48 * f[:, 1] - 36 * f[:, 2] + 16 * f[:, 3] - 3 * f[:, 4]) / (12 * h)
+    d[:, 1] = (-3 * f[:, 0] - 10 * f[:, 1] + 18 * f[:, 2] - 6 * f[:, 3] + f[:, 4]) / (12 * h)
+    d[:, -1] = (25 * f[:, -1] - 48 * f[:, -2] + 36 * f[:, -3] - 16 * f[:, -4] + 3 * f[:, -5]) / (12 * h)
+    d[:, -2] = (3 * f[:, -1] + 10 * f[:, -2] - 18 * f[:, -3] + 6 * f[:, -4] - f[:, -5]) / (12 * h)
+    return d
+
+
+def interpolate(f: np.ndarray, h: float, t: np.ndarray) -> np.ndarray:
+    """Cubic Lagrange interpolation of f (B, J, k) on the grid j·h at times t (B, n) [s] → (B, n, k);
+    NaN where t lies outside the grid."""
+    B, J, _ = f.shape
+    u = t / h
+    j = np.clip(np.floor(u).astype(np.intp) - 1, 0, J - 4)
+    s = u - j                                          # position relative to node j, in [1, 2) inside
+    w = np.stack([-(s - 1) * (s - 2) * (s - 3) / 6, s * (s - 2) * (s - 3) / 2,
+                  -s * (s - 1) * (s - 3) / 2, s * (s - 1) * (s - 2) / 6], axis=-1)      # (B, n, 4)
+    rows = np.arange(B)[:, None, None]
+    nodes = f[rows, j[..., None] + np.arange(4)]                                          # (B, n, 4, k)
+    out = np.einsum("bnp,bnpk->bnk", w, nodes)
+    out[(t < 0) | (t > (J - 1) * h)] = np.nan
+    return out
+
+
+def sensor_rotation(tilt: np.ndarray) -> np.ndarray:
+    """C (B, 3, 3) mapping body to sensor components for tilts ε (B, 2) [rad] (sensor z ≈ b3)."""
+    rv = np.concatenate([tilt, np.zeros((tilt.shape[0], 1))], axis=1)
+    return np.transpose(quat_to_matrix(quat_from_rotvec(rv)), (0, 2, 1))
+
+
+def specific_force_body(states: np.ndarray, h: float, g: float, r_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Body-frame angular velocity ω_B and specific force f_B at the sensor (module docstring).
+
+    Parameters
+    ----------
+    states : (B, J, 13) array
+        Simulated states on a uniform grid of step h [s].
+    h : float
+        Grid step [s].
+    g : float
+        Gravitational acceleration [m/s²].
+    r_s : (B, 3) array
+        Sensor position in body axes [m].
+
+    Returns
+    -------
+    omega : (B, J, 3) array
+        ω_B [rad/s].
+    f : (B, J, 3) array
+        Specific force f_B [m/s²].
+    """
+    w = states[..., 10:13]
+    a = fd_derivative(states[..., 3:6], h)
+    a[..., 2] += g
+    R = quat_to_matrix(states[..., 6:10])
+    f_cm = np.einsum("bjik,bji->bjk", R, a)                  # Rᵀ (dv/dt + g ẑ)
+    w_dot = fd_derivative(w, h)
+    r = r_s[:, None, :]
+    f = f_cm + np.cross(w_dot, r) + np.cross(w, np.cross(w, r))
+    return w, f
+
+
+@dataclass(eq=False)
+class InertialMeasurements(ObservationModel):
+    """Gyroscope and filtered accelerometer of one throw (module docstring).
+
+    Parameters
+    ----------
+    log : InertialLog
+        The throw's free flight (first row = release), gyro rad/s, acc m/s², sensor axes.
+    g : float
+        Gravitational acceleration [m/s²].
+    period : float
+        Nominal row period [s] (sets the simulation grid; the row period itself is a parameter for logs
+        without time column).
+    """
+
+    id = "imu"
+    title = "Inertial logger: gyroscope and low-pass-filtered accelerometer"
+    equations = ("ω_s = C ω_B + b_g;  τ dy/dt = C[Rᵀ(dv/dt + g ẑ) + ω̇_B × r_s + ω_B × (ω_B × r_s)] − y, "
+                 "a_s = y + b_a;  t_i = (row_i − row_0) P")
+
+    log: InertialLog
+    g: float
+    period: float
+    _obs: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self):
+        self.flight = self.log.name
+        self.timed = self.log.times is not None
+        rows = np.asarray(self.log.rows, float)
+        self.row_offsets = rows - rows[0]                         # (n,) rows since release
+        self.h = self.period / OVERSAMPLE
+        if self.timed:
+            self.sample_times = np.asarray(self.log.times, float) - float(self.log.times[0])
+            span = self.sample_times[-1]
+        else:
+            span = self.row_offsets[-1] * self.period * PERIOD_SPAN
+        n_grid = max(int(np.ceil(span / self.h)) + 3, 6)
+        self.times = np.arange(n_grid) * self.h                   # simulation grid [s] from release
+        data = np.concatenate([self.log.gyro, self.log.acc], axis=1)          # (n, 6)
+        self._seen = np.isfinite(data)
+        self._obs = data[self._seen]
+        channel = np.broadcast_to(np.arange(6), data.shape)[self._seen]
+        self._groups = np.array([1, 1, 0, 3, 3, 2])[channel].astype(np.intp)
+
+    # -- contract ------------------------------------------------------------------------------------
+    @property
+    def shared_parameters(self) -> tuple[TermParameter, ...]:
+        return SHARED_PARAMETERS
+
+    @property
+    def parameters(self) -> tuple[TermParameter, ...]:
+        own = [] if self.timed else [TermParameter("imu_period", "s", "logger row period P",
+                                                   0.010, 0.003)]
+        own += [TermParameter(f"gyro_bias_{a}", "rad/s", f"gyro bias along sensor {a}", 0.0, 0.05) for a in "xyz"]
+        own += [TermParameter(f"acc_bias_{a}", "m/s²", f"accelerometer bias along sensor {a}", 0.0, 0.5)
+                for a in "xyz"]
+        own += [TermParameter(f"lpf_state_{a}", "m/s²", f"accelerometer filter state at release along {a}",
+                              0.0, 50.0) for a in "xyz"]
+        return tuple(own)
+
+    @property
+    def noise_names(self) -> tuple[str, ...]:
+        return tuple(f"sigma_{g}_{self.flight}" for g in GROUPS)
+
+    @property
+    def group_index(self) -> np.ndarray:
+        return self._groups
+
+    def sample_times_for(self, period: np.ndarray) -> np.ndarray:
+        """(B, n) sample times [s] since release for row periods (B,) (ignored for timed logs)."""
+        if self.timed:
+            return np.broadcast_to(self.sample_times, (period.shape[0], self.sample_times.size))
+        return period[:, None] * self.row_offsets[None, :]
+
+    def split(self, extra: np.ndarray) -> dict:
+        """Named parameter arrays (B, …) from the model's extra values (shared, then own)."""
+        s = extra[:, :6]
+        own = extra[:, 6:]
+        j = 0 if self.timed else 1
+        return {"r_s": s[:, 0:3], "tau": s[:, 3], "tilt": s[:, 4:6],
+                "period": own[:, 0] if not self.timed else np.full(extra.shape[0], np.nan),
+                "b_g": own[:, j:j + 3], "b_a": own[:, j + 3:j + 6], "y0": own[:, j + 6:j + 9]}
+
+    def predict(self, trajectories, extra: np.ndarray | None) -> np.ndarray:
+        """(B, n, 6) predicted gyro [rad/s] and accelerometer [m/s²] at the log's samples; NaN for a
+        parameter vector whose samples fall beyond the simulated grid or whose τ is not positive."""
+        p = self.split(extra)
+        w, f = specific_force_body(trajectories.states, self.h, self.g, p["r_s"])
+        C = sensor_rotation(p["tilt"])
+        ws = np.einsum("bik,bjk->bji", C, w)
+        fs = np.einsum("bik,bjk->bji", C, f)
+        tau = np.where(p["tau"] > 0, p["tau"], np.nan)
+        y = low_pass(np.ascontiguousarray(fs), np.ascontiguousarray(p["y0"]), np.nan_to_num(tau, nan=1.0), self.h)
+        t = self.sample_times_for(p["period"])
+        out = interpolate(np.concatenate([ws, y], axis=2), self.h, t)
+        out[..., :3] += p["b_g"][:, None, :]
+        out[..., 3:] += p["b_a"][:, None, :]
+        out[~np.isfinite(tau)] = np.nan
+        return out
+
+    def residuals(self, prediction: np.ndarray) -> np.ndarray:
+        return prediction[:, self._seen] - self._obs[None]
