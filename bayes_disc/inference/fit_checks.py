@@ -23,7 +23,8 @@ def check_fit_plausible(ls, problem, max_rms_m: float = MAX_PLAUSIBLE_RMS_M) -> 
     Parameters
     ----------
     ls : LeastSquaresResult
-        The fit (``ls.sigma`` (n_flights,) holds each flight's residual RMS [m]).
+        The fit (``ls.sigma`` holds each noise group's residual RMS; the marker group of a flight is
+        ``sigma_<flight>`` [m]; flights without markers are not checked here).
     problem : Problem
         Its problem (``problem.flights`` give the file, line and name of each flight).
     max_rms_m : float
@@ -34,7 +35,10 @@ def check_fit_plausible(ls, problem, max_rms_m: float = MAX_PLAUSIBLE_RMS_M) -> 
     ImplausibleDataError
         Naming the worst flight, its RMS and the likely causes.
     """
-    rms = np.asarray(ls.sigma, float)
+    names = list(problem.sigma_names)
+    marker = [k for k, f in enumerate(problem.flights) if f"sigma_{f.name}" in names]   # flights with markers
+    rms = np.zeros(problem.n_flights)
+    rms[marker] = [ls.sigma[names.index(f"sigma_{problem.flights[k].name}")] for k in marker]
     bad = np.flatnonzero(rms > max_rms_m)
     if not bad.size:
         return
