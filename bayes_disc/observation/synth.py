@@ -18,10 +18,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ..physics import (COEFFICIENT_NAMES, LITERATURE, TERMS, Coefficients, Disc, Environment, Trajectories, get_terms,
+from ..physics import (COEFFICIENT_NAMES, LITERATURE, Coefficients, Disc, Environment, Trajectories, get_terms,
                        literature_coefficients, simulate)
 from ..physics.frames import (angle_of_attack, attitude_from_yaw_pitch_roll, omega_body_from_pqr,
                               quat_to_matrix)
+from .config_blocks import read_disc_env, read_markers, read_physics  # noqa: F401 (moved; imported back)
 from .config_io import ConfigError, Section, load_yaml
 from .explanations import EXPLANATIONS
 from .markers import FlightObservation, table_from_flights, write_marker_csv
@@ -222,55 +223,6 @@ def _coefficients(path, sec: Section) -> Coefficients:
         base[n] = c.number(n, base[n])
     c.finish()
     return Coefficients.from_mapping(base)
-
-
-def read_disc_env(path, sec: Section) -> tuple[Disc, Environment]:
-    d = sec.section("disc")
-    disc = Disc(mass=d.number("mass", Disc.mass, positive=True), Ia=d.number("Ia", Disc.Ia, positive=True),
-                Id=d.number("Id", Disc.Id, positive=True),
-                diameter=d.number("diameter", Disc.diameter, positive=True),
-                area=d.number("area", Disc.area, positive=True))
-    d.finish()
-    e = sec.section("environment")
-    env = Environment(rho=e.number("rho", Environment.rho, positive=True), g=e.number("g", Environment.g, positive=True))
-    e.finish()
-    return disc, env
-
-
-def read_markers(path, sec: Section, default=None) -> dict:
-    raw = sec.raw("markers", default, required=default is None)
-    if not isinstance(raw, dict) or len(raw) < 3:
-        raise ConfigError(path, "markers", "must map at least 3 marker ids to [x, y, z] body positions (m)")
-    m = Section(path, {str(k): v for k, v in raw.items()}, "markers")
-    out = {str(k): m.vector(str(k), 3) for k in list(m.data)}
-    m.finish()
-    pts = np.array(list(out.values()))
-    if np.abs(pts).max() > 1.0:
-        raise ConfigError(path, "markers", "body positions larger than 1 m: give metres, not millimetres")
-    return out
-
-
-def read_physics(path, sec: Section, marker_ids=None) -> dict:
-    """The ``physics:`` block: term id → {parameter: starting value}. With ``marker_ids`` (run
-    configurations) the data explanations ``marker_geometry`` and ``time_offset`` are allowed too."""
-    raw = sec.raw("physics", {}) or {}
-    if not isinstance(raw, dict):
-        raise ConfigError(path, "physics", "must map term ids to their parameters")
-    out = {}
-    for tid, params in raw.items():
-        if marker_ids is not None and tid in EXPLANATIONS:
-            parameters = EXPLANATIONS[tid].parameters_for(tuple(marker_ids))
-        else:
-            try:
-                (term,) = get_terms([tid])
-            except KeyError:
-                known = sorted(TERMS) + (sorted(EXPLANATIONS) if marker_ids is not None else [])
-                raise ConfigError(path, f"physics.{tid}", f"unknown term {tid!r}; known: {known}") from None
-            parameters = term.parameters
-        s = Section(path, params, f"physics.{tid}")
-        out[tid] = {p.name: s.number(p.name, p.off_value) for p in parameters}
-        s.finish()
-    return out
 
 
 def _gust(path, f: Section) -> tuple | None:
