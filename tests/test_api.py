@@ -76,6 +76,19 @@ def test_sample_from_dataframe_then_load_gives_the_same_summary(tmp_path, monkey
         np.testing.assert_array_equal(a.observed, b.observed)
 
 
+def test_identifiability_from_a_dict_config(tmp_path, demo_rows):
+    config = {"name": "idf", "flights": demo_rows, "markers": MARKERS, **SMALL}      # flights: one table
+    result = bd.identifiability(config, output=tmp_path / "out", design=False)
+    table = result.summary
+    assert list(table.index) == ["CL0", "CLa", "CD0", "CDa", "CM0", "CMa", "CMq", "CRr", "CRp", "CNr"]
+    assert set(table["verdict"]) <= {"identified", "weak", "unidentified"}
+    assert result.verdicts == dict(table["verdict"]) and result.recommendation is None
+    again = bd.IdentifiabilityResult.from_dir(tmp_path / "out")
+    pd.testing.assert_frame_equal(again.summary, table, check_exact=True)
+    with pytest.raises(FileNotFoundError, match="posterior.nc|summary.json"):
+        result.report(tmp_path / "r.html")                  # no sampled run in that folder
+
+
 def test_load_of_a_folder_without_a_run_is_an_error(tmp_path):
     with pytest.raises(FileNotFoundError, match="summary.json"):
         bd.load(tmp_path)
