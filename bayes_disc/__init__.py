@@ -1,2 +1,19 @@
-"""bayes-disc: Bayesian estimation of flying-disc aerodynamic coefficients from tracked flights."""
-__version__ = "0.1.0"
+"""bayes-disc: Bayesian estimation of flying-disc aerodynamic coefficients from tracked flights.
+
+The Python API (:mod:`bayes_disc.api`)::
+
+    import bayes_disc as bd
+    run = bd.sample("config.yaml")          # or a RunConfig, or a dict with flights as DataFrames
+    run.summary                             # pandas table: mean, sd, quantiles, R-hat, ESS per parameter
+    run.idata                               # ArviZ InferenceData
+    run.report()                            # reports/<name>.html
+    bd.load(run.output)                     # the same run, from disk
+
+See docs/api.md for a worked example.
+"""
+from ._version import __version__
+from .api import (DiagnosisResult, IdentifiabilityResult, SampleResult, diagnose, identifiability, load,
+                  run_config, sample)
+
+__all__ = ["__version__", "sample", "identifiability", "diagnose", "load", "run_config", "SampleResult",
+           "IdentifiabilityResult", "DiagnosisResult"]

@@ -1,14 +1,25 @@
-"""Command line: ``bayes-disc COMMAND ...`` (SPEC §6). Bad input: one-line reason on stderr, exit 2."""
+"""Command line: ``bayes-disc COMMAND ...`` (SPEC §6). Bad input: one-line reason on stderr, exit 2.
+
+Progress messages go to stderr, results (tables, the diagnosis in words) to stdout; ``-v`` shows more,
+``-q`` less (:mod:`._logging`). The jobs run through :mod:`.pipeline` (job, then report), as in the API.
+"""
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 from pathlib import Path
+from types import MappingProxyType
 
-from . import __version__
+from ._logging import cli_logging
+from ._version import __version__
 from .observation.cases import CaseFileError, load_case, simulate_case
 from .observation.config_io import ConfigError
 from .observation.markers import MarkerFileError, write_marker_csv
+
+logger = logging.getLogger(__name__)
+#: ``extra`` of log records that are results (printed on stdout)
+RESULT = MappingProxyType({"result": True})
 
 #: exceptions that mean "bad input" rather than a bug: reported in one line, exit status 2
 INPUT_ERRORS: tuple[type[Exception], ...] = (ConfigError, MarkerFileError, CaseFileError, FileNotFoundError)
@@ -19,7 +30,7 @@ def _cmd_simulate(args) -> int:
     table, _ = simulate_case(case)
     out = Path(args.output)
     write_marker_csv(out, table)
-    print(f"wrote {out} ({len(table)} rows, {case.times.size} samples at {case.sample_rate_hz:g} Hz)")
+    logger.info(f"wrote {out} ({len(table)} rows, {case.times.size} samples at {case.sample_rate_hz:g} Hz)")
     return 0
 
 
@@ -30,51 +41,72 @@ def _cmd_synth(args) -> int:
     write_synth(result, markers_path, truth_path)
     for name, f in result.truth["flights"].items():
         lo, hi = f["alpha_range_deg"]
-        print(f"{name}: α {lo:.1f}…{hi:.1f}°, range {f['range_m']:.1f} m, noise {f['noise_m'] * 1e3:.1f} mm, "
-              f"{f['n_dropped']} points dropped")
-    print(f"wrote {markers_path} and {truth_path}")
+        logger.info(f"{name}: α {lo:.1f}…{hi:.1f}°, range {f['range_m']:.1f} m, noise {f['noise_m'] * 1e3:.1f} mm, "
+                    f"{f['n_dropped']} points dropped", extra=RESULT)
+    logger.info(f"wrote {markers_path} and {truth_path}")
     return 0
 
 
 def _cmd_sample(args) -> int:
+    from . import pipeline
     from .inference.config import load_config
-    from .inference.run import run_sample
     cfg = load_config(args.config, output_override=args.output)
-    summary = run_sample(cfg, resume=args.resume, progress=not args.no_progress)
+    summary = pipeline.sample(cfg, resume=args.resume, progress=not args.no_progress).result
     return 0 if summary["convergence"]["converged"] or not args.strict else 3
 
 
 def _cmd_identifiability(args) -> int:
-    from .diagnostics.run import run_identifiability
+    from . import pipeline
     from .inference.config import load_config
     cfg = load_config(args.config, output_override=args.output)
-    run_identifiability(cfg, profiles=args.profiles, design=not args.no_design)
+    pipeline.identifiability(cfg, profiles=args.profiles, design=not args.no_design)
     return 0
 
 
 def _cmd_diagnose(args) -> int:
-    from .diagnostics.diagnosis import run_diagnose
+    from . import pipeline
     from .inference.config import load_config
     cfg = load_config(args.config, output_override=args.output)
-    run_diagnose(cfg, sample=not args.no_sample, processes=args.processes, progress=not args.no_progress)
+    pipeline.diagnose(cfg, sample=not args.no_sample, processes=args.processes, progress=not args.no_progress)
     return 0
 
 
+def _verbosity_options(parser, default) -> None:
+    """``-v/--verbose`` and ``-q/--quiet`` (repeatable); ``default`` SUPPRESS on subcommands so that a flag
+    given before the subcommand is not reset by the subcommand's defaults."""
+    parser.add_argument("-v", "--verbose", dest="log_more", action="count", default=default,
+                        help="more messages (debug details); repeatable")
+    parser.add_argument("-q", "--quiet", dest="log_less", action="count", default=default,
+                        help="fewer messages: -q only results and problems, -qq only problems")
+
+
 def build_parser() -> argparse.ArgumentParser:
+    """The ``bayes-disc`` argument parser with every subcommand.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+    """
     parser = argparse.ArgumentParser(prog="bayes-disc",
                                      description="Estimate flying-disc aerodynamic coefficients from tracked "
                                                  "flights. Documentation: docs/index.md in the repository.")
     parser.add_argument("--version", action="version", version=f"bayes-disc {__version__}")
+    _verbosity_options(parser, 0)
+    common = argparse.ArgumentParser(add_help=False)
+    _verbosity_options(common, argparse.SUPPRESS)
     sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("simulate", help="simulate a case (reference JSON format) to a marker CSV")
+    p = sub.add_parser("simulate", parents=[common],
+                       help="simulate a case (reference JSON format) to a marker CSV")
     p.add_argument("case", help="CASE.json: disc constants, coefficients, marker body positions, initial state, "
                                 "sample rate, duration (format: docs/data-formats.md)")
     p.add_argument("-o", "--output", required=True, help="marker CSV to write (format: docs/data-formats.md)")
     p.set_defaults(func=_cmd_simulate)
-    p = sub.add_parser("synth", help="make synthetic flights from a SYNTH.yaml description")
+    p = sub.add_parser("synth", parents=[common],
+                       help="make synthetic flights from a SYNTH.yaml description")
     p.add_argument("config", help="SYNTH.yaml")
     p.set_defaults(func=_cmd_synth)
-    p = sub.add_parser("sample", help="least squares + emcee posterior over coefficients and initial conditions",
+    p = sub.add_parser("sample", parents=[common],
+                       help="least squares + emcee posterior over coefficients and initial conditions",
                        description="The main job: joint least squares, then emcee ensembles, over the ten "
                                    "coefficients and every flight's initial conditions. Writes summary.json, "
                                    "posterior.nc, least_squares.json, profiles.json, run_info.json and chains/ in the "
@@ -85,7 +117,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--strict", action="store_true", help="exit 3 if the cap is reached before convergence")
     p.set_defaults(func=_cmd_sample)
-    p = sub.add_parser("identifiability", help="which coefficients the flights determine, and the next throw",
+    p = sub.add_parser("identifiability", parents=[common],
+                       help="which coefficients the flights determine, and the next throw",
                        description="Least squares and Fisher information (no MCMC): a verdict per coefficient "
                                    "(identified, weak, unidentified) with its reason, the flight envelope, and the "
                                    "most informative next throw. Writes identifiability.json in the output folder "
@@ -95,7 +128,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-design", action="store_true", help="skip the ranking of candidate throws")
     p.add_argument("--output", help="override the config's output folder")
     p.set_defaults(func=_cmd_identifiability)
-    p = sub.add_parser("diagnose", help="locate a model–data mismatch, name the missing physics, refit",
+    p = sub.add_parser("diagnose", parents=[common],
+                       help="locate a model–data mismatch, name the missing physics, refit",
                        description="Is the model missing physics? Ranks candidate terms by ΔBIC, accepts one only "
                                    "when the residuals turn white, and resamples with it. Writes diagnosis.json, "
                                    "diagnosis_residuals.npz and diagnosis_refit/ in the output folder "
@@ -107,7 +141,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--output", help="override the config's output folder")
     p.add_argument("--no-progress", action="store_true", help="no progress bar while resampling")
     p.set_defaults(func=_cmd_diagnose)
-    _register_optional(sub)
+    _register_optional(sub, common)
     return parser
 
 
@@ -121,11 +155,12 @@ def _positive_int(text: str) -> int:
     return value
 
 
-def _register_optional(sub) -> None:
-    """Subcommands that live in their own packages (report, video front end)."""
+def _register_optional(sub, common) -> None:
+    """Subcommands that live in their own packages (report, video front end; ``track`` and ``render`` have
+    their own ``-q``, so the common verbosity options are given only before the subcommand)."""
     from .report.cli import register as register_report
     from .video.cli import register as register_video
-    register_report(sub)
+    register_report(sub, parents=[common])
     register_video(sub)
 
 
@@ -135,10 +170,39 @@ def _input_errors() -> tuple[type[Exception], ...]:
     return INPUT_ERRORS + (ReportInputError, VideoInputError)
 
 
+def verbosity(args) -> int:
+    """Number of ``-v`` minus number of ``-q`` given anywhere on the command line.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed arguments.
+
+    Returns
+    -------
+    int
+    """
+    return int(getattr(args, "log_more", 0) or 0) - int(getattr(args, "log_less", 0) or 0)
+
+
 def main(argv=None) -> int:
+    """Run ``bayes-disc`` with ``argv`` (default: ``sys.argv[1:]``).
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Command-line arguments without the program name.
+
+    Returns
+    -------
+    int
+        Exit status: 0 success, 2 bad input (one line on stderr), 3 ``sample --strict`` without
+        convergence, 130 interrupted.
+    """
     args = build_parser().parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        with cli_logging(verbosity(args)):
+            return int(args.func(args) or 0)
     except _input_errors() as e:
         print(f"bayes-disc {args.command}: {e}", file=sys.stderr)
         return 2

@@ -50,7 +50,7 @@ def main(argv=None) -> int:
         cfg = load_config(args.config, output_override=Path(tmp) / "out")
         per_walker, nw = logprob_time(cfg)
         t0 = time.perf_counter()
-        summary = run_sample(cfg, progress=False, log=lambda *a: None)
+        summary = run_sample(cfg, progress=False)
         wall = time.perf_counter() - t0
         info = json.loads((Path(tmp) / "out/run_info.json").read_text())
     conv = summary["convergence"]

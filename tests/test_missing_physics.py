@@ -59,7 +59,7 @@ def make_run(folder: Path, physics: dict, seed: int, gust: dict | None = None, m
 
 
 def diagnose(cfg_path: Path) -> dict:
-    return run_diagnose(load_config(cfg_path), sample=False, report=False, processes=1, log=lambda m: None)
+    return run_diagnose(load_config(cfg_path), sample=False, processes=1)
 
 
 def pooled_ratio(rms: dict) -> float:

@@ -7,10 +7,13 @@ Writes into the run's output folder:
   before/after, the shifted base coefficients, unexplained structure and the diagnosis in words;
 * ``diagnosis_residuals.npz``: the residual series before and after (report figures);
 * ``diagnosis_refit/``: the resampled run with the accepted terms (unless ``sample=False``).
+
+The HTML report (which includes the diagnosis) is built by :mod:`bayes_disc.pipeline`, not here.
 """
 from __future__ import annotations
 
 import json
+import logging
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -20,6 +23,7 @@ import numpy as np
 from ..inference.config import RunConfig
 from ..inference.data import build_problem, load_run_flights
 from ..inference.leastsq import fit_least_squares
+from ..inference.run import RESULT, run_sample
 from ..observation.registry import unit
 from ..physics import COEFFICIENT_NAMES
 from .missing_physics import (CANDIDATES, EVIDENCE_THRESHOLD, Diagnosis, ModelFit, describe_where, diagnose,
@@ -27,6 +31,7 @@ from .missing_physics import (CANDIDATES, EVIDENCE_THRESHOLD, Diagnosis, ModelFi
 from .missing_physics import SERIES_WORDS, onset_of_mismatch
 from .residuals import peak_window, series_of
 
+logger = logging.getLogger(__name__)
 #: a base coefficient "moved" when the refit shifts it by more than this many base standard deviations
 SHIFT_SD = 2.0
 
@@ -162,9 +167,28 @@ def save_series(path: Path, diag: Diagnosis) -> None:
     np.savez_compressed(path, **arrays)
 
 
-def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, log=print, report: bool = True,
-                 reports_dir="reports", progress: bool = True) -> dict:
-    """The ``diagnose`` command (module docstring); returns the diagnosis.json content."""
+def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progress: bool = True) -> dict:
+    """The ``diagnose`` command without its report (module docstring).
+
+    Parameters
+    ----------
+    cfg : RunConfig
+        The validated run configuration; files go to ``cfg.output``.
+    sample : bool
+        Resample (emcee) with the accepted terms into ``<output>/diagnosis_refit``; otherwise the
+        estimates after are least-squares (Laplace) ones.
+    processes : int
+        Parallel candidate fits.
+    progress : bool
+        Show a progress bar while resampling.
+
+    Returns
+    -------
+    dict
+        The content of ``diagnosis.json`` (SPEC §6): ``verdict``, ``effects`` ranked best first, RMS per flight
+        before and after [mm] (``rms_before_mm``, ``rms_after_mm``), and the details listed in the module
+        docstring (``words``: the diagnosis in words).
+    """
     t0 = time.perf_counter()
     out = Path(cfg.output)
     out.mkdir(parents=True, exist_ok=True)
@@ -175,16 +199,16 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, log=pr
         return build_problem(cfg, terms_override=list(ids), flights=flights)
 
     problem = build(base_ids)
-    log(f"{cfg.name}: {problem.n_flights} flights; base model"
+    logger.info(f"{cfg.name}: {problem.n_flights} flights; base model"
         + (f" with {', '.join(base_ids)}" if base_ids else "") + "; fitting by least squares")
     ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
                            seed=cfg.sampler.seed)
     base = model_fit(problem, ls, base_ids)
-    log("base RMS " + ", ".join(f"{f} {v:.2f} mm" for f, v in base.rms_mm.items()))
+    logger.info("base RMS " + ", ".join(f"{f} {v:.2f} mm" for f, v in base.rms_mm.items()))
     candidates = [c for c in CANDIDATES if c not in base_ids]
-    log(f"ranking {len(candidates)} candidates by ΔBIC (each a least-squares refit):")
+    logger.info(f"ranking {len(candidates)} candidates by ΔBIC (each a least-squares refit):")
     diag = diagnose(base, build, processes=processes, max_nfev=cfg.least_squares.max_nfev,
-                    candidates=candidates, log=log)
+                    candidates=candidates, log=logger.info)
     final = diag.final
     result = {"verdict": diag.verdict, "effects": [], "rms_before_mm": base.rms_mm, "rms_after_mm": final.rms_mm}
     before_est = _ls_estimates(base, COEFFICIENT_NAMES)
@@ -193,14 +217,13 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, log=pr
     after_est = _ls_estimates(final, COEFFICIENT_NAMES + tuple(final.problem.ext_names))
     refit_dir = out / "diagnosis_refit"
     if diag.accepted and sample:
-        from ..inference.run import run_sample
         physics = dict(cfg.physics)
         theta = dict(zip(final.problem.names, final.ls.theta))
         for c in diag.accepted:
             physics[c.id] = {n: float(theta[n]) for n in unit_parameter_names(c.id, problem.marker_ids)}
         refit_cfg = replace(cfg, name=f"{cfg.name}_refit", output=refit_dir, physics=physics)
-        log(f"resampling with {', '.join(c.id for c in diag.accepted)} → {refit_dir}")
-        run_sample(refit_cfg, progress=progress, log=log, report=False)
+        logger.info(f"resampling with {', '.join(c.id for c in diag.accepted)} → {refit_dir}")
+        run_sample(refit_cfg, progress=progress)
         after_est = _posterior_estimates(refit_dir, COEFFICIENT_NAMES + tuple(final.problem.ext_names))
     base_names = set(base.problem.ext_names)
     for rank, c in enumerate(diag.accepted):
@@ -232,15 +255,8 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, log=pr
     result["wall_time_s"] = time.perf_counter() - t0
     (out / "diagnosis.json").write_text(json.dumps(_finite(result), indent=1, allow_nan=False))
     save_series(out / "diagnosis_residuals.npz", diag)
-    log(result["words"])
-    log(f"wrote {out / 'diagnosis.json'} ({result['wall_time_s']:.0f} s)")
-    if report:
-        if (out / "summary.json").is_file() and (out / "posterior.nc").is_file():
-            from ..report import build_report
-            log(f"wrote {build_report(out, reports_dir=Path(reports_dir), seed=cfg.sampler.seed, log=None)}")
-        else:
-            log(f"no sampled run in {out}: run `bayes-disc sample {cfg.path}` for the HTML report "
-                "(it then includes this diagnosis)")
+    logger.info(result["words"], extra=RESULT)
+    logger.info(f"wrote {out / 'diagnosis.json'} ({result['wall_time_s']:.0f} s)")
     return result
 
 

@@ -14,6 +14,7 @@ Writes ``<output>/identifiability.json``:
 from __future__ import annotations
 
 import json
+import logging
 import time
 import warnings
 from pathlib import Path
@@ -24,10 +25,12 @@ from ..inference.config import RunConfig
 from ..inference.data import build_problem
 from ..inference.leastsq import fit_least_squares, whitened_jacobian
 from ..inference.profile import profile_paths
+from ..inference.run import RESULT
 from .identifiability import (ALPHA_PAIRS, coefficient_information, describe_throw, flight_envelopes, rank_throws,
                               verdicts_from_covariance, weak_directions)
 
 ALPHA_COEFFICIENTS = tuple(n for pair in ALPHA_PAIRS for n in pair)
+logger = logging.getLogger(__name__)
 
 
 def _posterior_block(out: Path, names) -> tuple[np.ndarray, np.ndarray] | None:
@@ -46,7 +49,25 @@ def _posterior_block(out: Path, names) -> tuple[np.ndarray, np.ndarray] | None:
     return x.mean(axis=0), np.cov(x.T)
 
 
-def run_identifiability(cfg: RunConfig, profiles: bool = False, log=print, design: bool = True) -> dict:
+def run_identifiability(cfg: RunConfig, profiles: bool = False, design: bool = True) -> dict:
+    """The ``identifiability`` command: least squares, Fisher information, verdicts and the next throw.
+
+    Parameters
+    ----------
+    cfg : RunConfig
+        The validated run configuration; ``identifiability.json`` goes to ``cfg.output``.
+    profiles : bool
+        Also profile the likelihood of every coefficient (slower).
+    design : bool
+        Rank candidate throws by how much they would shrink the weak coefficients' uncertainty.
+
+    Returns
+    -------
+    dict
+        The content of ``identifiability.json`` (module docstring): per coefficient ``verdict`` and
+        ``reason``, plus ``coefficients``, ``envelope`` (α in degrees, speed in m/s, spin in rad/s),
+        ``fisher``, ``least_squares`` (RMS in mm) and optionally ``profiles``, ``posterior``, ``design``.
+    """
     t0 = time.perf_counter()
     out = Path(cfg.output)
     out.mkdir(parents=True, exist_ok=True)
@@ -55,7 +76,7 @@ def run_identifiability(cfg: RunConfig, profiles: bool = False, log=print, desig
     names = problem.names[:nc]
     ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
                            seed=cfg.sampler.seed)
-    log(f"{cfg.name}: least squares cost {ls.cost:.1f}, RMS "
+    logger.info(f"{cfg.name}: least squares cost {ls.cost:.1f}, RMS "
         + ", ".join(f"{n} {s * 1e3:.2f} mm" for n, s in zip(ls.flight_names, ls.sigma)))
     # envelope
     env = flight_envelopes(problem, ls.theta)
@@ -121,12 +142,24 @@ def run_identifiability(cfg: RunConfig, profiles: bool = False, log=print, desig
                              "gain": r["gain"]} for r in ranking[:10]]}
     result["wall_time_s"] = time.perf_counter() - t0
     (out / "identifiability.json").write_text(json.dumps(result, indent=1))
-    log(format_verdicts(result))
-    log(f"wrote {out / 'identifiability.json'} ({result['wall_time_s']:.0f} s)")
+    logger.info(format_verdicts(result), extra=RESULT)
+    logger.info(f"wrote {out / 'identifiability.json'} ({result['wall_time_s']:.0f} s)")
     return result
 
 
 def format_verdicts(result: dict) -> str:
+    """The verdicts as text: α range, condition number, one line per coefficient, weak directions, next throw.
+
+    Parameters
+    ----------
+    result : dict
+        The content of ``identifiability.json``.
+
+    Returns
+    -------
+    str
+        Several lines, no trailing newline.
+    """
     lines = [f"α over all flights {result['envelope']['set']['alpha_deg'][0]:.1f}–"
              f"{result['envelope']['set']['alpha_deg'][1]:.1f}°; Fisher condition number "
              f"{result['fisher']['condition_number']:.3g}"]

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..observation.config_io import ConfigError, Section, load_yaml
-from ..observation.synth import read_disc_env, read_markers, read_physics
+from ..observation.config_blocks import read_disc_env, read_markers, read_physics
 from ..physics import Disc, Environment
 from ..physics.kernel import DEFAULT_METHOD, TABLEAUX
 
@@ -90,9 +90,55 @@ class RunConfig:
 
 
 def load_config(path, output_override=None) -> RunConfig:
-    """Read and validate CONFIG.yaml; every problem raises :class:`ConfigError` naming the key or file."""
+    """Read and validate CONFIG.yaml.
+
+    Parameters
+    ----------
+    path : str or Path
+        The configuration file (SPEC §5 plus the keys of this module's docstring); relative paths in it
+        resolve against its folder.
+    output_override : str or Path, optional
+        Replaces the configuration's output folder.
+
+    Returns
+    -------
+    RunConfig
+        The validated configuration.
+
+    Raises
+    ------
+    ConfigError
+        For every problem, naming the file and the key.
+    """
     path = Path(path)
-    sec = Section(path, load_yaml(path))
+    return config_from_mapping(load_yaml(path), path, output_override=output_override)
+
+
+def config_from_mapping(data: dict, path, output_override=None) -> RunConfig:
+    """Validate a configuration already read into a mapping (same keys and rules as CONFIG.yaml).
+
+    Parameters
+    ----------
+    data : dict
+        The configuration's top-level mapping.
+    path : str or Path
+        The file the mapping stands for: errors name it, relative paths resolve against its folder and
+        it is recorded as the run's configuration (``RunConfig.path``).
+    output_override : str or Path, optional
+        Replaces the configuration's output folder.
+
+    Returns
+    -------
+    RunConfig
+        The validated configuration.
+
+    Raises
+    ------
+    ConfigError
+        For every problem, naming ``path`` and the key.
+    """
+    path = Path(path)
+    sec = Section(path, data)
     name = sec.string("name", required=True)
     if any(c in name for c in "/\\") or name.startswith("."):
         raise ConfigError(path, "name", f"must be a plain run name, got {name!r}")

@@ -23,8 +23,9 @@ from ..physics import (COEFFICIENT_NAMES, LITERATURE, Coefficients, Disc, Enviro
 from ..physics.conditions import flight_conditions
 from ..physics.frames import (attitude_from_yaw_pitch_roll, omega_body_from_pqr,
                               quat_to_matrix)
+from .config_blocks import read_disc_env, read_markers, read_physics  # noqa: F401 (moved; imported back)
 from .config_io import ConfigError, Section, load_yaml
-from .registry import DATA_EXPLANATION, PHYSICS_TERM, unit, split_extensions
+from .registry import split_extensions
 from .markers import FlightObservation, table_from_flights, write_marker_csv
 
 DEFAULT_MARKERS = {"0": [0.100, 0.000, -0.015], "1": [-0.0308, 0.0846, -0.015], "2": [-0.0707, -0.0778, -0.015]}
@@ -223,51 +224,6 @@ def _coefficients(path, sec: Section) -> Coefficients:
         base[n] = c.number(n, base[n])
     c.finish()
     return Coefficients.from_mapping(base)
-
-
-def read_disc_env(path, sec: Section) -> tuple[Disc, Environment]:
-    d = sec.section("disc")
-    disc = Disc(mass=d.number("mass", Disc.mass, positive=True), Ia=d.number("Ia", Disc.Ia, positive=True),
-                Id=d.number("Id", Disc.Id, positive=True),
-                diameter=d.number("diameter", Disc.diameter, positive=True),
-                area=d.number("area", Disc.area, positive=True))
-    d.finish()
-    e = sec.section("environment")
-    env = Environment(rho=e.number("rho", Environment.rho, positive=True), g=e.number("g", Environment.g, positive=True))
-    e.finish()
-    return disc, env
-
-
-def read_markers(path, sec: Section, default=None) -> dict:
-    raw = sec.raw("markers", default, required=default is None)
-    if not isinstance(raw, dict) or len(raw) < 3:
-        raise ConfigError(path, "markers", "must map at least 3 marker ids to [x, y, z] body positions (m)")
-    m = Section(path, {str(k): v for k, v in raw.items()}, "markers")
-    out = {str(k): m.vector(str(k), 3) for k in list(m.data)}
-    m.finish()
-    pts = np.array(list(out.values()))
-    if np.abs(pts).max() > 1.0:
-        raise ConfigError(path, "markers", "body positions larger than 1 m: give metres, not millimetres")
-    return out
-
-
-def read_physics(path, sec: Section, marker_ids=None) -> dict:
-    """The ``physics:`` block: term id → {parameter: starting value}. With ``marker_ids`` (run
-    configurations) the data explanations ``marker_geometry`` and ``time_offset`` are allowed too."""
-    raw = sec.raw("physics", {}) or {}
-    if not isinstance(raw, dict):
-        raise ConfigError(path, "physics", "must map term ids to their parameters")
-    out = {}
-    kinds = (PHYSICS_TERM, DATA_EXPLANATION) if marker_ids is not None else (PHYSICS_TERM,)
-    for tid, params in raw.items():
-        try:
-            parameters = unit(str(tid), kinds).parameters(tuple(marker_ids or ()))
-        except KeyError as e:
-            raise ConfigError(path, f"physics.{tid}", e.args[0]) from None
-        s = Section(path, params, f"physics.{tid}")
-        out[tid] = {p.name: s.number(p.name, p.off_value) for p in parameters}
-        s.finish()
-    return out
 
 
 def _gust(path, f: Section) -> tuple | None:

@@ -6,7 +6,8 @@ capabilities add theirs to that list.
 """
 from .errors import ReportInputError
 from .run import build_report, build_sections
-from .sections import DEFAULT_SECTION_IDS, ReportFigure, Section, default_builders
+from .builders import DEFAULT_SECTION_IDS, default_builders
+from .sections import ReportFigure, Section
 
 __all__ = ["ReportInputError", "build_report", "build_sections", "DEFAULT_SECTION_IDS", "ReportFigure", "Section",
            "default_builders"]

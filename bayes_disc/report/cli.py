@@ -10,16 +10,24 @@ from .errors import ReportInputError
 def _report(args) -> int:
     from .run import build_report
     try:
-        build_report(args.run_dir, reports_dir=Path(args.reports_dir), seed=args.seed, log=print)
+        build_report(args.run_dir, reports_dir=Path(args.reports_dir), seed=args.seed)   # logs the path written
     except ReportInputError as e:
         print(f"bayes-disc report: {e}", file=sys.stderr)
         return 2
     return 0
 
 
-def register(subparsers) -> None:
-    """Add the ``report`` subcommand to an argparse subparsers object."""
-    p = subparsers.add_parser("report", help="HTML report and figures of a `sample` run folder",
+def register(subparsers, parents=()) -> None:
+    """Add the ``report`` subcommand to an argparse subparsers object.
+
+    Parameters
+    ----------
+    subparsers : argparse._SubParsersAction
+        From ``ArgumentParser.add_subparsers``.
+    parents : sequence of argparse.ArgumentParser
+        Parsers whose options the subcommand shares (the main CLI's verbosity options).
+    """
+    p = subparsers.add_parser("report", parents=list(parents), help="HTML report and figures of a `sample` run folder",
                               description="Write reports/<name>.html (self-contained) and the figures as PNG and "
                                           "PDF in RUN_DIR/figures.")
     p.add_argument("run_dir", help="output folder of `bayes-disc sample` (holds summary.json, posterior.nc)")

@@ -1,12 +1,11 @@
 """The standard section builders (see :mod:`.sections`). Each takes a ReportContext, returns a Section."""
 from __future__ import annotations
 
-import platform
-from importlib import metadata
 from pathlib import Path
 
 import numpy as np
 
+from ..inference.versions import software_versions
 from . import figures as F
 from .sections import Raw, Section, esc, fmt, table
 
@@ -32,18 +31,6 @@ def _range(x, digits=1, scale=1.0) -> str:
     if not np.isfinite(x).any():
         return "–"
     return f"{np.nanmin(x):.{digits}f} … {np.nanmax(x):.{digits}f}"
-
-
-def software_versions() -> dict[str, str]:
-    """Versions of bayes-disc, Python and the numerical packages (for run_info.json and the report)."""
-    from .. import __version__
-    out = {"bayes-disc": __version__, "Python": platform.python_version()}
-    for pkg in ("numpy", "scipy", "numba", "emcee", "arviz", "corner", "matplotlib", "h5py"):
-        try:
-            out[pkg] = metadata.version(pkg)
-        except metadata.PackageNotFoundError:
-            out[pkg] = "not installed"
-    return out
 
 
 def _prior_table(name: str) -> dict:

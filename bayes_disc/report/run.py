@@ -1,17 +1,39 @@
 """``build_report``: a run folder → ``reports/<name>.html`` plus every figure as PNG and PDF."""
 from __future__ import annotations
 
+import logging
 import time
 import warnings
 from pathlib import Path
 
+from .builders import default_builders
 from .context import ReportContext, load_run
 from .html import render_document
-from .sections import Section, SectionBuilder, default_builders
+from .sections import Section, SectionBuilder
+
+logger = logging.getLogger(__name__)
 
 
 def build_sections(ctx: ReportContext, builders: list[SectionBuilder] | None = None) -> list[Section]:
-    """Run the builders in order; a builder returning None is left out. Ids must be unique."""
+    """Run the section builders in order.
+
+    Parameters
+    ----------
+    ctx : ReportContext
+        The run being reported.
+    builders : list of callable, optional
+        Section builders (default :func:`~.builders.default_builders`); a builder returning None is left out.
+
+    Returns
+    -------
+    list of Section
+        The sections in order.
+
+    Raises
+    ------
+    ValueError
+        If two sections share an id.
+    """
     sections = []
     for b in (default_builders() if builders is None else builders):
         s = b(ctx)
@@ -25,13 +47,30 @@ def build_sections(ctx: ReportContext, builders: list[SectionBuilder] | None = N
 
 
 def build_report(run_dir, reports_dir=Path("reports"), builders: list[SectionBuilder] | None = None,
-                 seed: int = 0, log=None) -> Path:
+                 seed: int = 0) -> Path:
     """Write ``<reports_dir>/<name>.html`` (self-contained) and ``<run_dir>/figures/*.png|pdf``.
 
-    run_dir: a ``bayes-disc sample`` output folder; reports_dir: relative paths resolve against the current
-    working directory (SPEC §6: ``reports/<name>.html``); builders: section builders (default
-    :func:`~.sections.default_builders`); seed: seed of every random choice (posterior draws, noise).
-    Raises :class:`~.errors.ReportInputError` for a missing or invalid run folder.
+    Parameters
+    ----------
+    run_dir : str or Path
+        A ``bayes-disc sample`` output folder (summary.json, posterior.nc, run_info.json).
+    reports_dir : str or Path
+        Folder of the HTML file; relative paths resolve against the current working directory
+        (SPEC §6: ``reports/<name>.html``).
+    builders : list of callable, optional
+        Section builders (default :func:`~.builders.default_builders`).
+    seed : int
+        Seed of every random choice (posterior draws, noise).
+
+    Returns
+    -------
+    Path
+        The HTML file written. Its path, section and figure counts are logged at INFO level.
+
+    Raises
+    ------
+    ReportInputError
+        For a missing or invalid run folder.
     """
     t0 = time.perf_counter()
     run = load_run(run_dir)
@@ -48,6 +87,5 @@ def build_report(run_dir, reports_dir=Path("reports"), builders: list[SectionBui
     html = render_document(f"bayes-disc report: {name}", subtitle, sections,
                            footer=f"Report built in {elapsed:.1f} s; figures in {ctx.figure_dir}.")
     out.write_text(html, encoding="utf-8")
-    if log is not None:
-        log(f"wrote {out} ({len(sections)} sections, {len(ctx.figures_written)} figures, {elapsed:.1f} s)")
+    logger.info(f"wrote {out} ({len(sections)} sections, {len(ctx.figures_written)} figures, {elapsed:.1f} s)")
     return out

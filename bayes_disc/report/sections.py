@@ -3,9 +3,12 @@
 A :class:`Section` is a self-contained block: an id (the HTML anchor; tests and links rely on it), a title,
 a one-line reading guide, an HTML body and its figures. A *section builder* is any callable
 ``builder(ctx) -> Section | None`` taking the :class:`~.context.ReportContext` of a run; ``None`` leaves the
-section out. :func:`default_builders` returns the standard list; a later capability adds its section by
+section out. :func:`.builders.default_builders` returns the standard list; a later capability adds its section by
 passing ``builders=default_builders() + [my_builder]`` (or inserting it where it belongs) to
 :func:`~.run.build_report`, without touching the rest of the report.
+
+This module holds only the building blocks; it imports none of the section builders (:mod:`.content`
+imports it), so the report's modules import one way: sections → content → builders → run.
 """
 from __future__ import annotations
 
@@ -73,16 +76,3 @@ class Raw:
     """Markup that :func:`table` inserts unescaped."""
 
     html: str
-
-
-def default_builders() -> list[SectionBuilder]:
-    """The standard sections, in report order (a new list each call: callers may extend it)."""
-    from . import content
-    return [content.run_summary, content.coefficient_table, content.corner_section, content.convergence_section,
-            content.residual_section, content.flight_section, content.force_curve_section,
-            content.identifiability_section, content.missing_physics_section]
-
-
-#: section ids of :func:`default_builders`, in order
-DEFAULT_SECTION_IDS = ("summary", "coefficients", "corner", "convergence", "residuals", "flights",
-                       "force-curves", "identifiability", "missing-physics")

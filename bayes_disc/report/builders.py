@@ -1,0 +1,24 @@
+"""The standard list of section builders, in report order (see :mod:`.sections` for the protocol)."""
+from __future__ import annotations
+
+from . import content
+from .sections import SectionBuilder
+
+
+def default_builders() -> list[SectionBuilder]:
+    """The standard sections, in report order.
+
+    Returns
+    -------
+    list of callable
+        A new list on every call (callers may extend it); each item maps a
+        :class:`~.context.ReportContext` to a :class:`~.sections.Section` or None.
+    """
+    return [content.run_summary, content.coefficient_table, content.corner_section, content.convergence_section,
+            content.residual_section, content.flight_section, content.force_curve_section,
+            content.identifiability_section, content.missing_physics_section]
+
+
+#: section ids of :func:`default_builders`, in order
+DEFAULT_SECTION_IDS = ("summary", "coefficients", "corner", "convergence", "residuals", "flights",
+                       "force-curves", "identifiability", "missing-physics")
