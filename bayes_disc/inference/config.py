@@ -23,6 +23,10 @@ physics: {side_force: {CY: 0.0}}        # extra terms (physics.TERMS) and data e
 flight_options:                          # per flight, by name
   fffl10: {t_start: 0.0, t_end: 0.8}     # time window [s]
 truth: truth.json                        # optional truth file (synthetic data) for reports
+imu:                                     # inertial logs (instead of or besides `flights`)
+  - file: data/2025-08-31-002-rb.csv
+    format: flatball-ins                 # or imu-csv
+    throws: [[1007, 1344]]               # optional: release and first-impact rows per throw (default: found)
 ```
 """
 from __future__ import annotations
@@ -67,6 +71,18 @@ class FlightOption:
 
 
 @dataclass(frozen=True)
+class ImuSource:
+    """One inertial log of the run: file, format and optional explicit throws (logger rows, end exclusive)."""
+
+    file: Path
+    format: str
+    throws: tuple[tuple[int, int], ...] | None = None
+
+
+IMU_FORMATS = ("flatball-ins", "imu-csv")
+
+
+@dataclass(frozen=True)
 class RunConfig:
     path: Path
     name: str
@@ -83,6 +99,7 @@ class RunConfig:
     physics: dict = field(default_factory=dict)
     flight_options: dict = field(default_factory=dict)
     truth: Path | None = None
+    imu: tuple[ImuSource, ...] = ()
 
     @property
     def marker_ids(self) -> tuple[str, ...]:
@@ -142,8 +159,11 @@ def config_from_mapping(data: dict, path, output_override=None) -> RunConfig:
     name = sec.string("name", required=True)
     if any(c in name for c in "/\\") or name.startswith("."):
         raise ConfigError(path, "name", f"must be a plain run name, got {name!r}")
-    raw_flights = sec.raw("flights", required=True)
-    if not isinstance(raw_flights, list) or not raw_flights:
+    imu = _read_imu(path, sec)
+    raw_flights = sec.raw("flights", None, required=not imu)
+    if raw_flights is None:
+        raw_flights = []
+    elif not isinstance(raw_flights, list) or not raw_flights:
         raise ConfigError(path, "flights", "must be a non-empty list of {file: ...}")
     files = []
     for i, rf in enumerate(raw_flights):
@@ -153,7 +173,7 @@ def config_from_mapping(data: dict, path, output_override=None) -> RunConfig:
         if not file.is_file():
             raise ConfigError(path, f"flights[{i}].file", f"file not found: {file}")
         files.append(file)
-    markers = read_markers(path, sec)
+    markers = read_markers(path, sec) if files or "markers" in sec.data else {}
     disc, env = read_disc_env(path, sec)
     prior = sec.string("prior", "potts_crowther", choices=PRIORS)
     out = sec.string("output", None)
@@ -184,7 +204,7 @@ def config_from_mapping(data: dict, path, output_override=None) -> RunConfig:
     method = sim.string("method", DEFAULT_METHOD, choices=tuple(TABLEAUX))
     step = sim.number("step_factor", None, positive=True)
     sim.finish()
-    physics = read_physics(path, sec, marker_ids=tuple(markers))
+    physics = read_physics(path, sec, marker_ids=tuple(markers) if markers else None)
     fo_raw = sec.raw("flight_options", {}) or {}
     if not isinstance(fo_raw, dict):
         raise ConfigError(path, "flight_options", "must map flight names to options")
@@ -203,4 +223,33 @@ def config_from_mapping(data: dict, path, output_override=None) -> RunConfig:
     sec.finish()
     return RunConfig(path=path, name=name, files=tuple(files), markers=markers, disc=disc, env=env, prior=prior,
                      output=output, sampler=sampler, least_squares=least, simulator_method=method,
-                     simulator_step_factor=step, physics=physics, flight_options=flight_options, truth=truth_path)
+                     simulator_step_factor=step, physics=physics, flight_options=flight_options, truth=truth_path,
+                     imu=imu)
+
+
+def _read_imu(path: Path, sec: Section) -> tuple[ImuSource, ...]:
+    """The ``imu:`` list: file (relative to the config), format, optional throws [[start, end], ...]."""
+    raw = sec.raw("imu", None)
+    if raw is None:
+        return ()
+    if not isinstance(raw, list) or not raw:
+        raise ConfigError(path, "imu", "must be a non-empty list of {file: ..., format: ...}")
+    out = []
+    for i, entry in enumerate(raw):
+        e = Section(path, entry, f"imu[{i}]")
+        file = path.parent / e.string("file", required=True)
+        fmt = e.string("format", required=True, choices=IMU_FORMATS)
+        throws = e.raw("throws", None)
+        e.finish()
+        if not file.is_file():
+            raise ConfigError(path, f"imu[{i}].file", f"file not found: {file}")
+        if throws is not None:
+            ok = isinstance(throws, list) and throws and all(
+                isinstance(t, list) and len(t) == 2 and all(isinstance(v, int) for v in t) and t[1] > t[0] + 10
+                for t in throws)
+            if not ok:
+                raise ConfigError(path, f"imu[{i}].throws", "must be a list of [release_row, end_row] integer pairs "
+                                  "(end after release, at least 10 rows)")
+            throws = tuple((int(a), int(b)) for a, b in throws)
+        out.append(ImuSource(file=file, format=fmt, throws=throws))
+    return tuple(out)

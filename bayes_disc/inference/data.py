@@ -9,6 +9,8 @@ from ..observation.plausibility import check_flights
 from ..observation.registry import split_extensions
 from ..physics import SimulatorSettings
 from .config import RunConfig
+from ..observation.models import MarkerPositions
+from .inertial import inertial_model, level_start, load_run_throws, own_start, search_starts
 from .initial import initial_state_from_data
 from .model import Problem
 
@@ -35,23 +37,73 @@ def load_run_flights(cfg: RunConfig):
     return out
 
 
-def build_problem(cfg: RunConfig, terms_override=None, flights=None) -> Problem:
-    """The Problem of a run; ``terms_override`` (ids of physics terms and data explanations) replaces the
-    config's ``physics`` block."""
+def build_problem(cfg: RunConfig, terms_override=None, flights=None, throws=None) -> Problem:
+    """The Problem of a run.
+
+    Parameters
+    ----------
+    cfg : RunConfig
+    terms_override : list of str, optional
+        Ids of physics terms and data explanations replacing the config's ``physics`` block.
+    flights : list of FlightObservation, optional
+        Marker flights (default: read from the config's files).
+    throws : list of InertialThrow, optional
+        Inertial throws (default: read from the config's ``imu`` sources); only those with status ``ok``
+        are fitted. A throw named like a marker flight is the same flight seen by both (its marker times
+        must start at release).
+
+    Returns
+    -------
+    Problem
+    """
     flights = load_run_flights(cfg) if flights is None else flights
-    mb = np.array([cfg.markers[i] for i in cfg.marker_ids], float)
-    check_flights(flights, mb, cfg.env.g)  # physical plausibility before any fitting (ImplausibleDataError)
-    starts = []
+    throws = [t for t in (load_run_throws(cfg) if throws is None else throws) if t.status == "ok"]
+    mb = np.array([cfg.markers[i] for i in cfg.marker_ids], float) if cfg.markers else np.zeros((1, 3))
+    if flights:
+        check_flights(flights, mb, cfg.env.g)  # physical plausibility before any fitting (ImplausibleDataError)
+    ids = list(cfg.physics) if terms_override is None else list(terms_override)
+    terms, explanations = split_extensions(ids)
+    settings = SimulatorSettings(method=cfg.simulator_method, step_factor=cfg.simulator_step_factor)
+    by_name = {t.name: t for t in throws}
+    records, observations, starts, own = [], [], [], []
     for f in flights:
         try:
             starts.append(initial_state_from_data(f, mb))
         except ValueError as e:
             raise ConfigError(cfg.path, "flights", str(e)) from None
-    ids = list(cfg.physics) if terms_override is None else list(terms_override)
-    terms, explanations = split_extensions(ids)
-    settings = SimulatorSettings(method=cfg.simulator_method, step_factor=cfg.simulator_step_factor)
+        channels = [MarkerPositions(f, mb, tuple(explanations))]
+        extra = []
+        t = by_name.pop(f.name, None)
+        if t is not None:
+            channels.append(inertial_model(t, cfg.env.g))
+            extra = list(own_start(channels[-1], t))
+        records.append(f)
+        observations.append(tuple(channels))
+        own.append(np.array(extra, float))
+    inertial_only = []
+    for t in by_name.values():
+        model = inertial_model(t, cfg.env.g)
+        inertial_only.append(len(records))
+        records.append(t.log)
+        observations.append((model,))
+        starts.append(level_start(t))
+        own.append(own_start(model, t))
+    if not records:
+        raise ConfigError(cfg.path, "imu", "no throw to fit (every inertial throw is out of the model)")
     given = {name: v for tid in ids for name, v in cfg.physics.get(tid, {}).items()}
-    ext = [p for t in terms for p in t.parameters] + [p for e in explanations for p in e.parameters_for(cfg.marker_ids)]
-    return Problem(flights=flights, marker_body=mb, disc=cfg.disc, env=cfg.env, prior_name=cfg.prior,
-                   terms=terms, explanations=explanations, start_states=starts, settings=settings,
-                   term_start=np.array([given.get(p.name, p.off_value) for p in ext], float))
+    shared = {c.id: c.shared_parameters for ch in observations for c in ch}
+    ext = ([q for t in terms for q in t.parameters] + [q for e in explanations for q in e.parameters_for(cfg.marker_ids)]
+           + [q for ps in shared.values() for q in ps])
+    term_start = np.array([given.get(q.name, q.off_value) for q in ext], float)
+
+    def make(start_states):
+        return Problem(flights=records, marker_body=mb, disc=cfg.disc, env=cfg.env, prior_name=cfg.prior,
+                       terms=terms, explanations=explanations, start_states=start_states, settings=settings,
+                       observations=observations, own_start=own, term_start=term_start)
+
+    problem = make(starts)
+    if inertial_only:
+        for k in inertial_only:
+            starts[k] = search_starts(problem, k)
+        problem = make(starts)
+    return problem

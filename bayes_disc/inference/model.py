@@ -71,6 +71,8 @@ class Problem:
         Per flight, its observation models (each predicts from the flight simulated on its own grid
         ``times``); default: one :class:`MarkerPositions` per flight, with the explanations. A flight with
         no marker model gets the ``inertial`` initial conditions (:mod:`.layout`).
+    own_start : list of arrays, optional
+        Per flight, starting values of its own observation-model parameters (default: their off values).
     """
 
     flights: list[FlightObservation]
@@ -86,6 +88,7 @@ class Problem:
     rates: list[float] | None = None
     kernel_terms: tuple[Term, ...] = ()
     observations: list[tuple[ObservationModel, ...]] | None = None
+    own_start: list[np.ndarray] | None = None
 
     def __post_init__(self):
         if len(self.start_states) != len(self.flights):
@@ -199,12 +202,15 @@ class Problem:
                        disc=self.disc, env=self.env, prior_name=self.prior_name, terms=self.terms,
                        explanations=self.explanations, start_states=[self.start_states[k]],
                        term_start=self.term_start, settings=self.settings, rates=[self.rates[k]],
-                       kernel_terms=self.kernel_terms, observations=None if flight is not None else [self.channels[k]])
+                       kernel_terms=self.kernel_terms, observations=None if flight is not None else [self.channels[k]],
+                       own_start=None if not self.own_start else [self.own_start[k]])
 
     def start_vector(self) -> np.ndarray:
         """(dim,) prior means with the extension parameters at their starting values."""
         x = self.prior_mean.copy()
         x[self.layout.ext_slice] = self.term_start
+        for k, own in enumerate(self.own_start or []):
+            x[self.layout.own_slice(k)] = own
         return x
 
     # -- priors -----------------------------------------------------------------------------------------
@@ -282,7 +288,7 @@ class Problem:
                         marker_body=self.marker_body, terms=terms, extension=ext, settings=settings,
                         want_states=need)
 
-    def _channel_predictions(self, theta: np.ndarray, k: int):
+    def channel_predictions(self, theta: np.ndarray, k: int):
         """[(channel, prediction)] of flight k and the ok flags (B,): one simulation per distinct grid."""
         runs, out, ok = {}, [], np.ones(theta.shape[0], bool)
         for c, cols in zip(self.channels[k], self._columns[k]):
@@ -316,7 +322,7 @@ class Problem:
         """Residuals (B, n_res_k) (predicted − measured, every channel of flight k, each in its data's
         unit) and ok flags (B,)."""
         theta = np.atleast_2d(theta)
-        preds, ok = self._channel_predictions(theta, k)
+        preds, ok = self.channel_predictions(theta, k)
         parts = [c.residuals(p) for c, p in preds]
         return (parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)), ok
 
@@ -325,7 +331,7 @@ class Problem:
         theta = np.atleast_2d(theta)
         out = np.empty((theta.shape[0], self.n_groups))
         for k in range(self.n_flights):
-            preds, ok = self._channel_predictions(theta, k)
+            preds, ok = self.channel_predictions(theta, k)
             for (c, p), g in zip(preds, self._groups[k]):
                 ss = c.sum_squares(c.residuals(p))
                 out[:, g] = np.where(ok[:, None] & np.isfinite(ss), ss, np.inf)

@@ -127,6 +127,10 @@ def _separator_problem(header: list[str], first_data_line: str | None) -> str | 
     return None
 
 
+#: the words of every "coordinates look like millimetres" rejection (files and in-memory tables)
+MILLIMETRE_HINT = "looks like millimetres; marker files are in metres (docs/data-formats.md)"
+
+
 def _parse_row(row: list[str], line: int, header: list[str], idx: dict, known, path):
     """Reference validation of one data row (SPEC §4): (flight, t, marker, [x, y, z]) or MarkerFileError."""
     if len(row) != len(header):
@@ -145,8 +149,7 @@ def _parse_row(row: list[str], line: int, header: list[str], idx: dict, known, p
     if any(nan) and not all(nan):
         raise MarkerFileError(path, line, "some but not all coordinates are NaN")
     if not any(nan) and max(abs(v) for v in xyz) > MAX_COORDINATE_M:
-        raise MarkerFileError(path, line, f"coordinate {max(abs(v) for v in xyz):g} m: looks like "
-                              "millimetres; marker files are in metres (docs/data-formats.md)")
+        raise MarkerFileError(path, line, f"coordinate {max(abs(v) for v in xyz):g} m: {MILLIMETRE_HINT}")
     return flight, t, marker, xyz
 
 
@@ -309,7 +312,7 @@ def _validate_flight(table: MarkerTable, name: str, rows: np.ndarray, lines: np.
     spacing = _median_spacing(t, markers, table.xyz[rows])
     if spacing is not None and spacing > MAX_MARKER_SPACING_M:
         raise MarkerFileError(path, int(lines[rows[0]]), f"flight {name!r}: markers are {spacing:.3g} apart "
-                              "(median): looks like millimetres; marker files are in metres (docs/data-formats.md)")
+                              f"(median): {MILLIMETRE_HINT}")
 
 
 def _median_spacing(t, marker, xyz, max_samples: int = 200) -> float | None:

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from .markers import (MAX_COORDINATE_M, REQUIRED_COLUMNS, FlightObservation, MarkerFileError, MarkerTable,
+from .markers import (MAX_COORDINATE_M, MILLIMETRE_HINT, REQUIRED_COLUMNS, FlightObservation, MarkerFileError, MarkerTable,
                       flights_from_table, validate_table)
 
 
@@ -120,8 +120,7 @@ def marker_table_from_columns(columns, marker_ids=None, source: str = "<table>")
     big = np.flatnonzero(~nan.any(axis=1) & (np.abs(np.where(nan, 0.0, xyz)).max(axis=1) > MAX_COORDINATE_M))
     if big.size:
         r = int(big[0])
-        raise MarkerFileError(source, r, f"coordinate {np.abs(xyz[r]).max():g} m: looks like millimetres; "
-                              "SPEC §4 wants metres")
+        raise MarkerFileError(source, r, f"coordinate {np.abs(xyz[r]).max():g} m: {MILLIMETRE_HINT}")
     extra = {}
     for c in names:
         if c in REQUIRED_COLUMNS:

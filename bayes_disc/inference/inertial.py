@@ -1,0 +1,151 @@
+"""Inertial recordings of a run: throws found in the logs, their time base, and data-derived starts.
+
+For every ``imu:`` source of the configuration the log is read (repairs reported), its throws found
+(release to first impact; explicit rows when the configuration gives them), each throw's row period
+estimated from the magnetometer against the gyro (:mod:`bayes_disc.observation.imu.timebase`; used only
+to start the fit and to cross-check the period the flight model estimates), and the throw classified:
+a disc flown upside down (a hammer) is outside the right-side-up flight model and is reported as
+``out_of_model``, never fitted.
+
+Start of an inertial throw: body rates ω_0 from the gyro at release, the disc level, and the air velocity
+in body axes u = V (cos α cos ψ, cos α sin ψ, sin α) chosen on a grid of speeds V, angles of attack α and
+directions ψ in the disc plane (the "spin phase" of the airflow relative to the logger's axes, which the
+data determine but no simple formula gives) by the smallest noise-weighted misfit of the flight simulated
+with the wind-tunnel coefficients.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..observation.imu import estimate_timebase, find_throws, read_imu, throw_logs
+from ..observation.imu.formats import ImuFileError, InertialLog
+from ..observation.models.inertial import InertialMeasurements
+from ..physics import literature_coefficients
+
+log = logging.getLogger(__name__)
+
+#: nominal row period [s] when a log has no magnetometer to estimate it from (firmware loop 100 Hz)
+NOMINAL_PERIOD = 0.010
+#: noise scales [rad/s, m/s²] weighting gyro against accelerometer misfit in the start search
+START_WEIGHTS = np.array([0.1, 0.1, 0.1, 1.0, 1.0, 1.0])
+
+
+@dataclass
+class InertialThrow:
+    """One throw of an inertial log: the free-flight sub-log, where it came from and whether it is fitted."""
+
+    log: InertialLog
+    source: str
+    status: str                      # ok | out_of_model
+    reason: str
+    segment: dict = field(default_factory=dict)
+    period_mag_gyro: float | None = None
+    period_mag_gyro_sd: float | None = None
+    repairs: list = field(default_factory=list)
+
+    @property
+    def name(self) -> str:
+        return self.log.name
+
+    def to_dict(self) -> dict:
+        return {"source": self.source, "status": self.status, "reason": self.reason, "segment": self.segment,
+                "rows": int(len(self.log.rows)), "period_mag_gyro_s": self.period_mag_gyro,
+                "period_mag_gyro_sd_s": self.period_mag_gyro_sd, "repairs": self.repairs}
+
+
+def load_run_throws(cfg) -> list[InertialThrow]:
+    """Every throw of the configuration's ``imu:`` sources (fitted ones and out-of-model ones).
+
+    Parameters
+    ----------
+    cfg : RunConfig
+
+    Returns
+    -------
+    list of InertialThrow
+    """
+    out = []
+    for src in cfg.imu:
+        for rec in read_imu(src.file, src.format):
+            for r in rec.repairs:
+                log.info("%s: repaired: %s", src.file.name, r)
+            if rec.times is not None:          # imu-csv: each flight is a free flight from its first row
+                out.append(InertialThrow(rec, str(src.file), "ok", "timed log: whole flight", repairs=rec.repairs))
+                continue
+            segments = find_throws(rec, override=list(src.throws) if src.throws else None)
+            if not segments:
+                raise ImuFileError(src.file, None, "no throw found (|gyro| never exceeds the spin threshold); "
+                                   "give the rows with imu[..].throws")
+            for seg, sub in zip(segments, throw_logs(rec, segments)):
+                tb = estimate_timebase(rec, seg.start + 5, seg.end, name=seg.name) if rec.mag is not None else None
+                status, reason = "ok", seg.reason
+                if seg.orientation == "upside_down":
+                    status = "out_of_model"
+                    reason = ("flown upside down (accelerometer z shows the lift along +b3): the flight model is "
+                              "for a right-side-up disc; not fitted")
+                info = {"start_row": int(seg.start), "end_row": int(seg.end), "orientation": seg.orientation,
+                        "reason": seg.reason}
+                out.append(InertialThrow(sub, str(src.file), status, reason, info,
+                                         None if tb is None else float(tb.mag_gyro.period),
+                                         None if tb is None else float(tb.mag_gyro.sd), list(rec.repairs)))
+    names = [t.name for t in out]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ImuFileError(out[0].source, None, f"throw name(s) {dup} appear in more than one log")
+    return out
+
+
+def inertial_model(throw: InertialThrow, g: float) -> InertialMeasurements:
+    """The observation model of a throw (nominal period: the magnetometer/gyro estimate, else 10 ms)."""
+    return InertialMeasurements(throw.log, g, period=throw.period_mag_gyro or NOMINAL_PERIOD)
+
+
+def level_start(throw: InertialThrow, speed: float = 12.0, alpha: float = 0.1, phase: float = 0.0) -> np.ndarray:
+    """A (13,) start state: release height 1 m, level right-side-up disc, body rates from the gyro at
+    release, air velocity V (cos α cos ψ, cos α sin ψ, sin α) in body axes."""
+    from ..physics.frames import matrix_to_quat
+    from .model import INERTIAL_RELEASE_HEIGHT, R_LEVEL
+    u = speed * np.array([np.cos(alpha) * np.cos(phase), np.cos(alpha) * np.sin(phase), np.sin(alpha)])
+    return np.r_[0.0, 0.0, INERTIAL_RELEASE_HEIGHT, R_LEVEL @ u, matrix_to_quat(R_LEVEL), throw.log.gyro[0]]
+
+
+def own_start(model: InertialMeasurements, throw: InertialThrow) -> np.ndarray:
+    """Starting values of a throw's own parameters: the period from the magnetometer/gyro, the filter
+    state from the first accelerometer row, biases 0."""
+    vals = {p.name: p.off_value for p in model.parameters}
+    if "imu_period" in vals:
+        vals["imu_period"] = model.period
+    for a, v in zip("xyz", throw.log.acc[0]):
+        vals[f"lpf_state_{a}"] = float(v)
+    return np.array([vals[p.name] for p in model.parameters])
+
+
+def search_starts(problem, k: int, speeds=(9.0, 13.0, 17.0), alphas=(0.0, 0.15, 0.35), phases=8) -> np.ndarray:
+    """The (13,) start state of inertial flight k with the smallest weighted misfit over the grid of the
+    module docstring (coefficients: Potts & Crowther; other parameters at the problem's start)."""
+    if problem.layout.flight_ic[k].kind != "inertial":
+        raise ValueError(f"flight {problem.flights[k].name!r} has markers: its start comes from them")
+    base = problem.start_vector()
+    base[: problem.n_coef] = literature_coefficients("potts_crowther").as_array()
+    grid = [(v, a, 2 * np.pi * j / phases) for v in speeds for a in alphas for j in range(phases)]
+    thetas = np.repeat(base[None], len(grid), axis=0)
+    w0 = problem.start_states[k][10:13]
+    for i, (v, a, ph) in enumerate(grid):
+        u = v * np.array([np.cos(a) * np.cos(ph), np.cos(a) * np.sin(ph), np.sin(a)])
+        thetas[i, problem.ic_slice(k)] = np.r_[0.0, 0.0, u, w0]
+    preds, ok = problem.channel_predictions(thetas, k)
+    cost = np.zeros(len(grid))
+    for c, p in preds:
+        if isinstance(c, InertialMeasurements):
+            r = (p - np.concatenate([c.log.gyro, c.log.acc], axis=1)[None]) / START_WEIGHTS
+            cost += np.nanmean(r ** 2, axis=(1, 2))
+    cost[~ok | ~np.isfinite(cost)] = np.inf
+    best = int(np.argmin(cost))
+    v, a, ph = grid[best]
+    log.info("%s: start V %.0f m/s, α %.0f°, airflow direction %.0f° in the disc plane (weighted misfit %.3g)",
+             problem.flights[k].name, v, np.degrees(a), np.degrees(ph), cost[best])
+    u = v * np.array([np.cos(a) * np.cos(ph), np.cos(a) * np.sin(ph), np.sin(a)])
+    return problem.ic_to_state(np.r_[0.0, 0.0, u, w0], k)[0]
