@@ -42,10 +42,12 @@ def accepted_keys(tmp_path: Path) -> dict:
     from bayes_disc.inference.config import load_config
     (tmp_path / "f.csv").write_text("flight,t,marker,x,y,z\n")
     (tmp_path / "truth.json").write_text("{}")
+    (tmp_path / "log.csv").write_text("flight,t,gx,gy,gz,ax,ay,az\n")
     physics = {tid: {} for tid in TERMS} | {eid: {} for eid in EXPLANATIONS}
     cfg = {"name": "keys", "flights": [{"file": "f.csv"}],
            "markers": {m: [0.1 * i, 0.0, -0.015] for i, m in enumerate(MARKER_IDS)},
-           "physics": physics, "flight_options": {FLIGHT: {"t_start": 0.0}}, "truth": "truth.json"}
+           "physics": physics, "flight_options": {FLIGHT: {"t_start": 0.0}}, "truth": "truth.json",
+           "imu": [{"file": "log.csv", "format": "imu-csv", "throws": [[0, 100]]}]}
     path = tmp_path / "config.yaml"
     path.write_text(yaml.safe_dump(cfg))
     seen: dict = {}

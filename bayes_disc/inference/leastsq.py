@@ -92,9 +92,9 @@ def _starts(problem: Problem, n: int, rng: np.random.Generator) -> list[np.ndarr
 
 
 def fit_least_squares(problem: Problem, starts: int = 4, max_nfev: int = 200, seed: int = 0,
-                      sigma0: float = 2e-3, progress=None) -> LeastSquaresResult:
+                      sigma0: float | None = None, progress=None) -> LeastSquaresResult:
     rng = np.random.default_rng(seed)
-    sigma = np.full(problem.n_groups, sigma0)
+    sigma = problem.nominal_noise if sigma0 is None else np.full(problem.n_groups, sigma0)
     results = []
     for i, x0 in enumerate(_starts(problem, starts, rng)):
         res = least_squares(whitened_residuals, x0, jac=whitened_jacobian, args=(problem, sigma), method="trf",
@@ -159,7 +159,7 @@ def _rms(problem: Problem, x: np.ndarray) -> np.ndarray:
         ms = np.bincount(g, weights=r[0] ** 2, minlength=problem.n_groups) / np.maximum(
             np.bincount(g, minlength=problem.n_groups), 1)
         groups = problem.flight_groups(k)
-        out[groups] = np.sqrt(ms[groups]) if ok[0] else 1e-2
-    return np.maximum(out, 1e-5)
+        out[groups] = np.sqrt(ms[groups]) if ok[0] else 5 * problem.nominal_noise[groups]
+    return np.maximum(out, 5e-3 * problem.nominal_noise)
 
 

@@ -148,6 +148,7 @@ class Problem:
                 g += len(c.noise_names)
             self._groups.append(per)
         self.n_coords = np.array(sizes)
+        self.nominal_noise = np.concatenate([c.nominal_noise for ch in self.channels for c in ch])
         self._residual_groups = [np.concatenate([c.group_index + s.start for c, s in zip(ch, per)])
                                  for ch, per in zip(self.channels, self._groups)]
         self.prior_mean, self.prior_sd = self._prior_arrays()

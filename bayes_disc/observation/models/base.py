@@ -91,6 +91,12 @@ class ObservationModel(ABC):
         """(n_res,) noise group of each residual."""
 
     @property
+    @abstractmethod
+    def nominal_noise(self) -> np.ndarray:
+        """(n_groups,) a plausible noise scale per group, in the data's unit: the weights of the first
+        least-squares pass (before each group's RMS replaces them)."""
+
+    @property
     def group_sizes(self) -> np.ndarray:
         """(n_groups,) number of residuals per noise group."""
         return np.bincount(self.group_index, minlength=len(self.noise_names))

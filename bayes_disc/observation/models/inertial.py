@@ -226,6 +226,10 @@ class InertialMeasurements(ObservationModel):
     def group_index(self) -> np.ndarray:
         return self._groups
 
+    @property
+    def nominal_noise(self) -> np.ndarray:
+        return np.array([0.02, 0.2, 0.3, 0.3])   # rad/s (axial, transverse), m/s² (axial, transverse)
+
     def sample_times_for(self, period: np.ndarray) -> np.ndarray:
         """(B, n) sample times [s] since release for row periods (B,) (ignored for timed logs)."""
         if self.timed:

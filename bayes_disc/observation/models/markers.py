@@ -69,6 +69,10 @@ class MarkerPositions(ObservationModel):
         return self._groups
 
     @property
+    def nominal_noise(self) -> np.ndarray:
+        return np.array([2e-3])          # m: motion capture 0.1–3 mm, video a few mm
+
+    @property
     def n_coords(self) -> int:
         """Number of observed coordinates (3 per seen marker point)."""
         return self._groups.size
