@@ -149,6 +149,7 @@ class Problem:
             self._groups.append(per)
         self.n_coords = np.array(sizes)
         self.nominal_noise = np.concatenate([c.nominal_noise for ch in self.channels for c in ch])
+        self.noise_units = [u for ch in self.channels for c in ch for u in c.noise_units]
         self._residual_groups = [np.concatenate([c.group_index + s.start for c, s in zip(ch, per)])
                                  for ch, per in zip(self.channels, self._groups)]
         self.prior_mean, self.prior_sd = self._prior_arrays()
@@ -191,6 +192,10 @@ class Problem:
     def residual_groups(self, k: int) -> np.ndarray:
         """(n_res_k,) noise-group index (into :attr:`sigma_names`) of each of flight k's residuals."""
         return self._residual_groups[k]
+
+    def channel_groups(self, k: int) -> list[slice]:
+        """Per observation model of flight k, the slice of its noise groups in :attr:`sigma_names`."""
+        return list(self._groups[k])
 
     def flight_groups(self, k: int) -> np.ndarray:
         """Indices of flight k's noise groups."""

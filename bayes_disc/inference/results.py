@@ -35,12 +35,17 @@ import numpy as np
 import xarray as xr
 
 from ..physics import COEFFICIENT_NAMES, LITERATURE
-from .layout import IC_NAMES, IC_UNITS
+from ..observation.models import MarkerPositions
+from ..observation.models.inertial import InertialMeasurements
+from .layout import IC_NAMES
 from .model import Problem
+
+#: the inertial channels, in the order of the models' predictions
+IMU_CHANNELS = ("gx", "gy", "gz", "ax", "ay", "az")
 from .priors import coefficient_prior
 from .sampler import Chains
 
-#: posterior.nc variables with a ``flight`` dimension: the initial conditions and the noise scale σ [m]
+#: posterior.nc variables with a ``flight`` dimension for marker runs: the initial conditions and σ [m]
 FLIGHT_VARIABLES = IC_NAMES + ("sigma",)
 #: most (chain × draw) samples in the ``log_likelihood`` group (float32; ~4000 draws × ~1300 points: ~21 MB)
 N_LOG_LIKELIHOOD_DRAWS = 4000
@@ -59,6 +64,27 @@ def _walkers_as_chains():
         yield
 
 
+def flight_entries(problem: Problem) -> list[tuple[str, int, str, int]]:
+    """Every per-flight quantity as (posterior.nc variable, flight index, "theta" | "sigma", index).
+
+    Initial conditions and a flight's own observation-model parameters (θ entries ``<var>_<flight>``) and its
+    noise scales (``<var>_<flight>`` among :attr:`Problem.sigma_names`) become variables with a ``flight``
+    dimension (NaN for flights that do not have them, e.g. ``x`` of a flight seen only by an inertial logger).
+    """
+    out = []
+    for k, f in enumerate(problem.flights):
+        s = problem.layout.flight_slice(k)
+        cut = len(f.name) + 1
+        out += [(n[:-cut], k, "theta", s.start + j) for j, n in enumerate(problem.names[s])]
+        out += [(problem.sigma_names[g][:-cut], k, "sigma", int(g)) for g in problem.flight_groups(k)]
+    return out
+
+
+def flight_variables(problem: Problem) -> list[str]:
+    """posterior.nc variables with a ``flight`` dimension, in order of first appearance."""
+    return list(dict.fromkeys(v for v, *_ in flight_entries(problem)))
+
+
 def structured_samples(problem: Problem, theta: np.ndarray, sigma: np.ndarray) -> dict:
     """Samples in the posterior.nc layout.
 
@@ -68,23 +94,25 @@ def structured_samples(problem: Problem, theta: np.ndarray, sigma: np.ndarray) -
         The run's model.
     theta : ndarray, shape (..., problem.dim)
         Parameter vectors in model order.
-    sigma : ndarray, shape (..., problem.n_flights)
-        Noise scale of each flight [m].
+    sigma : ndarray, shape (..., problem.n_groups)
+        Noise scale of each noise group (unit of its data).
 
     Returns
     -------
     dict
-        ``{name: (...,)}`` for coefficients and extra-term parameters, ``{ic_name: (..., n_flights)}`` for the
-        twelve initial-condition components and ``{"sigma": (..., n_flights)}``.
+        ``{name: (...,)}`` for coefficients and shared parameters, ``{var: (..., n_flights)}`` for the
+        per-flight quantities of :func:`flight_entries` (NaN where a flight has no such quantity).
     """
     scalar = problem.names[: problem.ic_start]
-    clash = set(scalar) & set(FLIGHT_VARIABLES)
+    clash = set(scalar) & set(flight_variables(problem))
     if clash:
         raise ValueError(f"parameter name(s) {sorted(clash)} clash with posterior.nc's per-flight variables")
     out = {n: theta[..., i] for i, n in enumerate(scalar)}
-    for j, n in enumerate(IC_NAMES):
-        out[n] = theta[..., [problem.ic_slice(k).start + j for k in range(problem.n_flights)]]
-    out["sigma"] = np.asarray(sigma)
+    shape = theta.shape[:-1] + (problem.n_flights,)
+    for var in flight_variables(problem):
+        out[var] = np.full(shape, np.nan)
+    for var, k, kind, i in flight_entries(problem):
+        out[var][..., k] = theta[..., i] if kind == "theta" else sigma[..., i]
     return out
 
 
@@ -93,10 +121,10 @@ def _locate(posterior: xr.Dataset, name: str) -> tuple[str, str | None]:
     if name in posterior.data_vars and "flight" not in posterior[name].dims:
         return name, None
     if "flight" in posterior.coords:
-        flights = {str(f) for f in posterior["flight"].values}
-        for var in FLIGHT_VARIABLES:
-            if name.startswith(var + "_") and name[len(var) + 1:] in flights and var in posterior.data_vars:
-                return var, name[len(var) + 1:]
+        for f in (str(f) for f in posterior["flight"].values):
+            var = name[: -len(f) - 1]
+            if name.endswith("_" + f) and var in posterior.data_vars and "flight" in posterior[var].dims:
+                return var, f
     raise KeyError(f"posterior has no parameter {name!r}")
 
 
@@ -253,6 +281,16 @@ def _thinned_steps(n_chain: int, n_steps: int, n_max: int) -> np.ndarray:
     return np.unique(np.linspace(0, n_steps - 1, k).round().astype(int))
 
 
+def _marker_flights(problem: Problem) -> list[tuple[int, object]]:
+    """(flight index, marker model) of every flight with marker positions."""
+    return [(k, c) for k, ch in enumerate(problem.channels) for c in ch if isinstance(c, MarkerPositions)]
+
+
+def _inertial_flights(problem: Problem) -> list[tuple[int, object]]:
+    """(flight index, inertial model) of every flight with an inertial logger."""
+    return [(k, c) for k, ch in enumerate(problem.channels) for c in ch if isinstance(c, InertialMeasurements)]
+
+
 def observation_points(problem: Problem) -> dict:
     """Coordinates of the observed marker points, flight by flight in time-major order.
 
@@ -260,19 +298,40 @@ def observation_points(problem: Problem) -> dict:
     -------
     dict
         ``point_flight`` (P,) str, ``point_time`` (P,) [s], ``point_marker`` (P,) str: the P observed
-        (time, marker) pairs, the order of :func:`pointwise_log_likelihood`'s last axis.
+        (time, marker) pairs, the order of :func:`pointwise_log_likelihood`'s marker points.
     """
-    fl, t, m = [], [], []
-    for f in problem.flights:
+    fl, t, m = [], [np.zeros(0)], []
+    for k, c in _marker_flights(problem):
+        f = c.data
         ti, mi = np.nonzero(f.observed)
         fl += [f.name] * ti.size
         t.append(f.times[ti])
         m += [str(f.marker_ids[j]) for j in mi]
-    return {"point_flight": np.array(fl), "point_time": np.concatenate(t), "point_marker": np.array(m)}
+    return {"point_flight": np.array(fl, dtype=str), "point_time": np.concatenate(t),
+            "point_marker": np.array(m, dtype=str)}
 
 
-def pointwise_log_likelihood(problem: Problem, theta: np.ndarray, sigma: np.ndarray):
-    """Per observed marker point log N(y | m(θ), σ_f² I₃) and the simulated markers.
+def inertial_points(problem: Problem) -> dict:
+    """Coordinates of the observed inertial values (every finite gyro and accelerometer entry).
+
+    Returns
+    -------
+    dict
+        ``imu_point_flight`` (Q,) str, ``imu_point_row`` (Q,) int (logger row since release),
+        ``imu_point_channel`` (Q,) str (gx … az): the order of the inertial log-likelihood's last axis.
+    """
+    fl, rows, ch = [], [np.zeros(0, int)], []
+    for k, c in _inertial_flights(problem):
+        r, j = np.nonzero(c._seen)
+        fl += [c.flight] * r.size
+        rows.append(c.row_offsets[r].astype(int))
+        ch += [IMU_CHANNELS[i] for i in j]
+    return {"imu_point_flight": np.array(fl, dtype=str), "imu_point_row": np.concatenate(rows),
+            "imu_point_channel": np.array(ch, dtype=str)}
+
+
+def pointwise_log_likelihood(problem: Problem, theta: np.ndarray, sigma: np.ndarray, inertial: bool = False):
+    """Pointwise conditional log-likelihoods (σ given) and the noise-free predictions.
 
     Parameters
     ----------
@@ -280,17 +339,23 @@ def pointwise_log_likelihood(problem: Problem, theta: np.ndarray, sigma: np.ndar
         The run's model.
     theta : ndarray, shape (B, problem.dim)
         Posterior draws.
-    sigma : ndarray, shape (B, problem.n_flights)
-        Each draw's noise scales [m] (drawn jointly with θ).
+    sigma : ndarray, shape (B, problem.n_groups)
+        Each draw's noise scales (drawn jointly with θ).
+    inertial : bool
+        Also return the inertial part.
 
     Returns
     -------
     log_lik : ndarray, shape (B, P)
-        Log-density [log m⁻³] of each observed point (three coordinates), points as in
-        :func:`observation_points`; summed over points of flight f it is the conditional log-likelihood
-        −(3 n_f/2) log(2πσ_f²) − S_f/(2σ_f²).
+        Log-density [log m⁻³] of each observed marker point (three coordinates; points as in
+        :func:`observation_points`); summed over the points of flight f it is the conditional
+        log-likelihood −(3 n_f/2) log(2πσ_f²) − S_f/(2σ_f²).
     markers : list of ndarray, shape (B, n_times_f, n_markers, 3)
-        Simulated markers [m] of every flight (at every sample time, also where unobserved).
+        Simulated markers [m] of every marker flight (at every sample time, also where unobserved).
+    imu_log_lik : ndarray, shape (B, Q)
+        (``inertial`` only) log N(y | ŷ(θ), σ_g²) of every observed inertial value (:func:`inertial_points`).
+    imu : list of ndarray, shape (B, n_rows_f, 6)
+        (``inertial`` only) predicted gyro [rad/s] and accelerometer [m/s²] of every inertial flight.
 
     Raises
     ------
@@ -298,17 +363,27 @@ def pointwise_log_likelihood(problem: Problem, theta: np.ndarray, sigma: np.ndar
         If a posterior draw's simulation fails (it had a finite posterior density when it was sampled).
     """
     theta = np.atleast_2d(theta)
-    out, sims = [], []
-    for k, f in enumerate(problem.flights):
-        markers = np.concatenate([problem.simulate(theta[i: i + BATCH], k, want_states=False).markers
-                                  for i in range(0, theta.shape[0], BATCH)])
-        r = markers[:, f.observed] - f.positions[f.observed][None]         # (B, n_points_f, 3)
-        if not np.all(np.isfinite(r)):
-            raise RuntimeError(f"flight {f.name}: a posterior draw no longer simulates")
-        s2 = sigma[:, k, None] ** 2
-        out.append(-1.5 * np.log(2 * np.pi * s2) - 0.5 * np.sum(r * r, axis=2) / s2)
-        sims.append(markers)
-    return np.concatenate(out, axis=1), sims
+    out, sims, imu_out, imu_sims = [], [], [], []
+    wanted = {k for k, _ in _marker_flights(problem)} | ({k for k, _ in _inertial_flights(problem)} if inertial else set())
+    for k in sorted(wanted):
+        preds = [problem.channel_predictions(theta[i: i + BATCH], k)[0] for i in range(0, theta.shape[0], BATCH)]
+        for j, (c, g) in enumerate(zip(problem.channels[k], problem.channel_groups(k))):
+            pred = np.concatenate([p[j][1] for p in preds])
+            r = c.residuals(pred)
+            if not np.all(np.isfinite(r)):
+                raise RuntimeError(f"flight {problem.flights[k].name}: a posterior draw no longer simulates")
+            s2 = sigma[:, g][:, c.group_index] ** 2                          # (B, n_res)
+            ll = -0.5 * np.log(2 * np.pi * s2) - 0.5 * r * r / s2
+            if isinstance(c, MarkerPositions):
+                out.append(ll.reshape(ll.shape[0], -1, 3).sum(axis=2))
+                sims.append(pred)
+            elif inertial:
+                imu_out.append(ll)
+                imu_sims.append(pred)
+    marker_ll = np.concatenate(out, axis=1) if out else np.zeros((theta.shape[0], 0))
+    if not inertial:
+        return marker_ll, sims
+    return marker_ll, sims, (np.concatenate(imu_out, axis=1) if imu_out else np.zeros((theta.shape[0], 0))), imu_sims
 
 
 def build_inference_data(problem: Problem, chains: Chains, rng: np.random.Generator, n_prior: int = 4000,
@@ -339,30 +414,57 @@ def build_inference_data(problem: Problem, chains: Chains, rng: np.random.Genera
     sig = np.moveaxis(chains.sigma, 2, 1).reshape(n_chain, n_steps, -1)
     lp = np.moveaxis(chains.log_prob, 2, 1).reshape(n_chain, n_steps)
     flights = [f.name for f in problem.flights]
-    flight_dims = {n: ["flight"] for n in FLIGHT_VARIABLES}
-    # the improper 1/σ prior is shown on [10 µm, 10 cm] (log-uniform)
-    prior_sigma = np.exp(rng.uniform(np.log(1e-5), np.log(0.1), size=(1, n_prior, problem.n_flights)))
+    fvars = flight_variables(problem)
+    flight_dims = {n: ["flight"] for n in fvars}
+    # the improper 1/σ prior is shown on [nominal/200, 50·nominal] (log-uniform; markers: 10 µm … 10 cm)
+    lo, hi = np.log(problem.nominal_noise / 200), np.log(problem.nominal_noise * 50)
+    prior_sigma = np.exp(lo + (hi - lo) * rng.uniform(size=(1, n_prior, problem.n_groups)))
     prior = structured_samples(problem, problem.sample_prior(n_prior, rng)[None], prior_sigma)
+    marker_flights, imu_flights = _marker_flights(problem), _inertial_flights(problem)
     observed, obs_coords, obs_dims = {}, {}, {}
-    for f in problem.flights:
+    for k, c in marker_flights:
+        f = c.data
         key = f"markers_{f.name}"
         observed[key] = f.positions
         obs_coords[f"time_{f.name}"] = f.times
         obs_dims[key] = [f"time_{f.name}", "marker", "axis"]
-    obs_coords.update(marker=[str(m) for m in problem.flights[0].marker_ids], axis=["x", "y", "z"])
+    if marker_flights:
+        obs_coords.update(marker=[str(m) for m in problem.marker_ids], axis=["x", "y", "z"])
+    for k, c in imu_flights:
+        key = f"imu_{c.flight}"
+        observed[key] = np.concatenate([c.log.gyro, c.log.acc], axis=1)
+        obs_coords[f"row_{c.flight}"] = c.row_offsets.astype(int)
+        obs_dims[key] = [f"row_{c.flight}", "imu_channel"]
+    if imu_flights:
+        obs_coords["imu_channel"] = list(IMU_CHANNELS)
     # thinned draws: pointwise log-likelihood and posterior predictive from one simulation
     ll_steps = _thinned_steps(n_chain, n_steps, n_log_likelihood)
     pp_steps = ll_steps[_thinned_steps(n_chain, ll_steps.size, n_predictive)]
     th = per_walker[:, ll_steps].reshape(-1, dim)
-    sg = sig[:, ll_steps].reshape(-1, problem.n_flights)
-    log_lik, sims = pointwise_log_likelihood(problem, th, sg)
-    points = observation_points(problem)
+    sg = sig[:, ll_steps].reshape(-1, problem.n_groups)
+    log_lik, sims, imu_ll, imu_sims = pointwise_log_likelihood(problem, th, sg, inertial=True)
     keep = np.isin(ll_steps, pp_steps)
+    sg_pp = sig[:, pp_steps]                                                  # (n_chain, n_pp, n_groups)
     predictive = {}
-    for k, f in enumerate(problem.flights):
-        m = sims[k].reshape(n_chain, ll_steps.size, *sims[k].shape[1:])[:, keep]
-        s = sig[:, pp_steps, k][..., None, None, None]
-        predictive[f"markers_{f.name}"] = (m + s * rng.standard_normal(m.shape)).astype(np.float32)
+    for (k, c), m in zip(marker_flights, sims):
+        m = m.reshape(n_chain, ll_steps.size, *m.shape[1:])[:, keep]
+        g = problem.channel_groups(k)[problem.channels[k].index(c)].start
+        s = sg_pp[..., g][..., None, None, None]
+        predictive[f"markers_{c.flight}"] = (m + s * rng.standard_normal(m.shape)).astype(np.float32)
+    for (k, c), m in zip(imu_flights, imu_sims):
+        m = m.reshape(n_chain, ll_steps.size, *m.shape[1:])[:, keep]
+        g = problem.channel_groups(k)[problem.channels[k].index(c)]
+        per_channel = np.array([1, 1, 0, 3, 3, 2])                           # noise group of gx … az
+        s = sg_pp[..., g][..., per_channel][:, :, None, :]
+        predictive[f"imu_{c.flight}"] = (m + s * rng.standard_normal(m.shape)).astype(np.float32)
+    ll_vars, ll_coords = {}, {"chain": np.arange(n_chain), "draw": ll_steps}
+    if marker_flights:
+        ll_vars["markers"] = (("chain", "draw", "point"), log_lik.reshape(n_chain, ll_steps.size, -1).astype(np.float32))
+        ll_coords.update(point=np.arange(log_lik.shape[1]), **{c: ("point", v) for c, v in observation_points(problem).items()})
+    if imu_flights:
+        ll_vars["imu"] = (("chain", "draw", "imu_point"), imu_ll.reshape(n_chain, ll_steps.size, -1).astype(np.float32))
+        ll_coords.update(imu_point=np.arange(imu_ll.shape[1]),
+                         **{c: ("imu_point", v) for c, v in inertial_points(problem).items()})
     with _walkers_as_chains():
         idata = az.from_dict(
             posterior=structured_samples(problem, per_walker, sig), sample_stats={"lp": lp},
@@ -370,11 +472,7 @@ def build_inference_data(problem: Problem, chains: Chains, rng: np.random.Genera
             coords={**obs_coords, "flight": flights},
             dims={**flight_dims, **obs_dims})
         idata.add_groups(
-            log_likelihood=xr.Dataset(
-                {"markers": (("chain", "draw", "point"),
-                             log_lik.reshape(n_chain, ll_steps.size, -1).astype(np.float32))},
-                coords={"chain": np.arange(n_chain), "draw": ll_steps, "point": np.arange(log_lik.shape[1]),
-                        **{c: ("point", v) for c, v in points.items()}}),
+            log_likelihood=xr.Dataset(ll_vars, coords=ll_coords),
             posterior_predictive=xr.Dataset(
                 {k: (("chain", "draw", *obs_dims[k]), v) for k, v in predictive.items()},
                 coords={"chain": np.arange(n_chain), "draw": pp_steps, **obs_coords}))
@@ -382,11 +480,12 @@ def build_inference_data(problem: Problem, chains: Chains, rng: np.random.Genera
                   "walker": ("chain", np.tile(np.arange(n_w), n_ens))}
     for group in ("posterior", "sample_stats", "log_likelihood", "posterior_predictive"):
         idata[group] = idata[group].assign_coords(ens_coords)
-    for n, unit in zip(IC_NAMES, IC_UNITS):
+    units = {}
+    for var, k, kind, i in flight_entries(problem):
+        units.setdefault(var, problem.layout.units[i] if kind == "theta" else problem.noise_units[i])
+    for n, unit in units.items():
         idata.posterior[n].attrs["units"] = unit
         idata.prior[n].attrs["units"] = unit
-    idata.posterior["sigma"].attrs["units"] = "m"
-    idata.prior["sigma"].attrs["units"] = "m"
     idata.posterior.attrs["chain_layout"] = (f"every emcee walker is a chain: chain c is walker walker[c] of the "
                                              f"independent ensemble ensemble[c] ({n_ens} ensembles × {n_w} walkers)")
     idata.posterior.attrs["r_hat"] = (
@@ -394,10 +493,12 @@ def build_inference_data(problem: Problem, chains: Chains, rng: np.random.Genera
         "= az.rhat(bayes_disc.inference.results.ensemble_view(idata.posterior)); az.summary(idata) treats "
         "each walker as a chain and gives summary.json's r_hat_walkers")
     idata.log_likelihood.attrs["observation"] = (
-        "one observed marker point (its x, y, z at one time): log N(y | m(theta), sigma_f^2 I3) with the "
-        "draw's own sigma_f; every walker, evenly spaced kept steps (draw = kept step index)")
-    idata.posterior_predictive.attrs["content"] = ("simulated markers + N(0, sigma_f^2) noise, every walker, "
-                                                   "evenly spaced kept steps (draw = kept step index)")
+        "markers: one observed marker point (its x, y, z at one time): log N(y | m(theta), sigma_f^2 I3) with the "
+        "draw's own sigma_f; imu: one gyro or accelerometer value, log N(y | yhat(theta), sigma_g^2); every "
+        "walker, evenly spaced kept steps (draw = kept step index)")
+    idata.posterior_predictive.attrs["content"] = ("simulated observations + Gaussian noise with the draw's noise "
+                                                   "scales, every walker, evenly spaced kept steps (draw = kept step "
+                                                   "index)")
     return idata
 
 

@@ -92,6 +92,11 @@ class ObservationModel(ABC):
 
     @property
     @abstractmethod
+    def noise_units(self) -> tuple[str, ...]:
+        """Unit of each noise group's scale (the data's unit)."""
+
+    @property
+    @abstractmethod
     def nominal_noise(self) -> np.ndarray:
         """(n_groups,) a plausible noise scale per group, in the data's unit: the weights of the first
         least-squares pass (before each group's RMS replaces them)."""

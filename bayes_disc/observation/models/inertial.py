@@ -227,6 +227,10 @@ class InertialMeasurements(ObservationModel):
         return self._groups
 
     @property
+    def noise_units(self) -> tuple[str, ...]:
+        return ("rad/s", "rad/s", "m/s²", "m/s²")
+
+    @property
     def nominal_noise(self) -> np.ndarray:
         return np.array([0.02, 0.2, 0.3, 0.3])   # rad/s (axial, transverse), m/s² (axial, transverse)
 

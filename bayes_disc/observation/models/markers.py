@@ -69,6 +69,10 @@ class MarkerPositions(ObservationModel):
         return self._groups
 
     @property
+    def noise_units(self) -> tuple[str, ...]:
+        return ("m",)
+
+    @property
     def nominal_noise(self) -> np.ndarray:
         return np.array([2e-3])          # m: motion capture 0.1–3 mm, video a few mm
 
