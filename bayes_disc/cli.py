@@ -15,6 +15,7 @@ from ._logging import cli_logging
 from ._version import __version__
 from .observation.cases import CaseFileError, load_case, simulate_case
 from .observation.config_io import ConfigError
+from .observation.imu.formats import ImuFileError
 from .observation.markers import MarkerFileError, write_marker_csv
 
 logger = logging.getLogger(__name__)
@@ -22,7 +23,8 @@ logger = logging.getLogger(__name__)
 RESULT = MappingProxyType({"result": True})
 
 #: exceptions that mean "bad input" rather than a bug: reported in one line, exit status 2
-INPUT_ERRORS: tuple[type[Exception], ...] = (ConfigError, MarkerFileError, CaseFileError, FileNotFoundError)
+INPUT_ERRORS: tuple[type[Exception], ...] = (ConfigError, MarkerFileError, CaseFileError, ImuFileError,
+                                              FileNotFoundError)
 
 
 def _cmd_simulate(args) -> int:
@@ -68,6 +70,19 @@ def _cmd_diagnose(args) -> int:
     from .inference.config import load_config
     cfg = load_config(args.config, output_override=args.output)
     pipeline.diagnose(cfg, sample=not args.no_sample, processes=args.processes, progress=not args.no_progress)
+    return 0
+
+
+def _cmd_predict(args) -> int:
+    from .inference.config import load_config
+    from .inference.predict import run_predict
+    cfg = load_config(args.config, output_override=args.output)
+    result = run_predict(cfg, args.run_dir, output=args.output)
+    for name, f in result["flights"].items():
+        words = f["reason"] if f["status"] != "ok" else ", ".join(
+            f"{c} RMS {v['rms_fixed']:.4g} (fixed) / {v['rms_free']:.4g} (free) {v['unit']}"
+            for c, v in f["channels"].items())
+        logger.info(f"{name}: {f['status']}: {words}", extra=RESULT)
     return 0
 
 
@@ -141,6 +156,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--output", help="override the config's output folder")
     p.add_argument("--no-progress", action="store_true", help="no progress bar while resampling")
     p.set_defaults(func=_cmd_diagnose)
+    p = sub.add_parser("predict", parents=[common],
+                       help="held-out validation: fit flights with a run's coefficients fixed, and free",
+                       description="Every flight of CONFIG is fitted with the coefficients and shared sensor "
+                                   "parameters fixed at the posterior medians of RUN_DIR (only its own initial "
+                                   "conditions and nuisance parameters free), and again with everything free. Writes "
+                                   "prediction.json: RMS per channel, fixed and free (docs/outputs.md).")
+    p.add_argument("config", help="run configuration YAML of the held-out flights (keys: docs/configuration.md)")
+    p.add_argument("--from", dest="run_dir", required=True, help="output folder of a `bayes-disc sample` run")
+    p.add_argument("--output", help="override the config's output folder")
+    p.set_defaults(func=_cmd_predict)
     _register_optional(sub, common)
     return parser
 

@@ -1,0 +1,137 @@
+"""``bayes-disc predict``: held-out validation of a run's coefficients on flights it has not seen.
+
+Every flight of the configuration is fitted twice by least squares:
+
+* **fixed** — the coefficients, extra-term parameters and the observation models' shared parameters (e.g.
+  the logger's position and filter constant) held at the posterior medians of ``RUN_DIR``; only the
+  flight's own initial conditions and nuisance parameters (row period, biases, filter state) free;
+* **free** — everything free (the flights of this configuration alone).
+
+The ratio of the two RMS per channel says how well the run's physics predicts a throw it did not see
+(≈ 1: as well as a fit to the throw itself). Inertial throws flown upside down are reported as
+``out_of_model`` and not fitted. Output ``prediction.json``:
+``{"flights": {flight: {"status", "reason", "channels": {channel: {"unit", "rms_fixed", "rms_free"}}}}}``,
+channels ``markers`` [m], ``gyro`` [rad/s], ``acc`` [m/s²].
+"""
+from __future__ import annotations
+
+import json
+import logging
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..observation.config_io import ConfigError
+from ..observation.models import MarkerPositions
+from .config import RunConfig
+from .data import build_problem
+from .inertial import load_run_throws
+from .leastsq import FAILED_RESIDUAL, fit_least_squares
+
+log = logging.getLogger(__name__)
+
+#: channel name, unit and the noise-group names (without ``_<flight>``) it pools, per observation model
+CHANNELS = {"markers": ("m", ("sigma",)), "gyro": ("rad/s", ("sigma_gyro_axial", "sigma_gyro_transverse")),
+            "acc": ("m/s²", ("sigma_acc_axial", "sigma_acc_transverse"))}
+
+
+def channel_rms(problem, theta: np.ndarray, k: int) -> dict:
+    """{channel: RMS} of flight k's residuals at θ (dim,), channels of :data:`CHANNELS`."""
+    r, ok = problem.residuals(theta[None], k)
+    if not ok[0]:
+        return {c: float("nan") for c in CHANNELS}
+    groups = problem.residual_groups(k)
+    name = problem.flights[k].name
+    out = {}
+    for ch, (_, prefixes) in CHANNELS.items():
+        ids = [problem.sigma_names.index(f"{p}_{name}") for p in prefixes if f"{p}_{name}" in problem.sigma_names]
+        if ids:
+            sel = np.isin(groups, ids)
+            out[ch] = float(np.sqrt(np.mean(r[0, sel] ** 2)))
+    return out
+
+
+def _fit_own(problem, theta: np.ndarray, k: int, max_nfev: int) -> np.ndarray:
+    """θ with flight k's own block refitted (shared entries held), weights refined twice from the RMS."""
+    cols = np.arange(problem.layout.flight_slice(k).start, problem.layout.flight_slice(k).stop)
+    x = theta.copy()
+    sigma = problem.nominal_noise.copy()
+    groups = problem.residual_groups(k)
+    for _ in range(3):
+        def resid(v):
+            y = x.copy()
+            y[cols] = v
+            r, ok = problem.residuals(y[None], k)
+            r = r[0] / sigma[groups]
+            if not ok[0] or not np.all(np.isfinite(r)):
+                r = np.full(r.shape, FAILED_RESIDUAL)
+            return np.r_[r, (v - problem.prior_mean[cols]) / problem.prior_sd[cols]]
+        res = least_squares(resid, x[cols], x_scale=problem.prior_sd[cols], max_nfev=max_nfev, xtol=1e-10,
+                            ftol=1e-10)
+        x[cols] = res.x
+        r, ok = problem.residuals(x[None], k)
+        if ok[0]:
+            for g in problem.flight_groups(k):
+                sigma[g] = max(float(np.sqrt(np.mean(r[0, groups == g] ** 2))), 5e-3 * problem.nominal_noise[g])
+    return x
+
+
+def run_predict(cfg: RunConfig, run_dir, output=None) -> dict:
+    """Held-out validation (module docstring); writes ``<output>/prediction.json``.
+
+    Parameters
+    ----------
+    cfg : RunConfig
+        The configuration of the held-out flights.
+    run_dir : str or Path
+        Output folder of a ``bayes-disc sample`` run (its ``summary.json`` is read).
+    output : str or Path, optional
+        Where to write (default: the configuration's output folder).
+
+    Returns
+    -------
+    dict
+        The content of prediction.json.
+    """
+    t0 = time.perf_counter()
+    run_dir = Path(run_dir)
+    summary_path = run_dir / "summary.json"
+    if not summary_path.is_file():
+        raise ConfigError(summary_path, None, "not found: --from must be the output folder of a sample run")
+    params = json.loads(summary_path.read_text())["parameters"]
+    throws = load_run_throws(cfg) if cfg.imu else []
+    problem = build_problem(cfg, throws=throws)
+    theta = problem.start_vector()
+    for i, name in enumerate(problem.names[: problem.ic_start]):
+        if name not in params:
+            raise ConfigError(summary_path, None, f"the run has no parameter {name!r} (its model differs from "
+                              "this configuration's: physics terms and observation models must match)")
+        theta[i] = params[name]["q50"]
+    log.info("predict: %d flight(s), coefficients and shared parameters from %s", problem.n_flights, run_dir)
+    free = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
+                             seed=cfg.sampler.seed)
+    flights = {}
+    for k, f in enumerate(problem.flights):
+        fixed = _fit_own(problem, theta, k, cfg.least_squares.max_nfev)
+        rf, rr = channel_rms(problem, fixed, k), channel_rms(problem, free.theta, k)
+        flights[f.name] = {"status": "ok", "reason": "",
+                           "channels": {c: {"unit": CHANNELS[c][0], "rms_fixed": rf[c], "rms_free": rr[c]}
+                                        for c in rf}}
+        log.info("%s: %s", f.name, ", ".join(f"{c} RMS fixed/free {rf[c]:.4g}/{rr[c]:.4g} {CHANNELS[c][0]} "
+                                             f"(×{rf[c] / rr[c]:.2f})" for c in rf))
+    for t in throws:
+        if t.status != "ok":
+            flights[t.name] = {"status": t.status, "reason": t.reason, "channels": {}}
+            log.info("%s: %s — %s", t.name, t.status, t.reason)
+    result = {"flights": flights, "from": str(run_dir), "config": str(cfg.path),
+              "fixed_parameters": {n: params[n]["q50"] for n in problem.names[: problem.ic_start]},
+              "marker_flights": [f.name for k, f in enumerate(problem.flights)
+                                 if any(isinstance(c, MarkerPositions) for c in problem.channels[k])],
+              "wall_time_s": time.perf_counter() - t0}
+    out = Path(output) if output is not None else Path(cfg.output)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "prediction.json").write_text(json.dumps(result, indent=1))
+    log.info("wrote %s", out / "prediction.json")
+    return result

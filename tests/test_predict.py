@@ -1,0 +1,66 @@
+"""`bayes-disc predict`: held-out flights fitted with a run's coefficients fixed, and free.
+
+The run folder is stood in for by a summary.json whose medians are the synthetic truth (a right model) or the
+truth with CLa and CMa off by 30 % (a wrong one): the mechanics of the command do not need a sample run."""
+import json
+
+import pytest
+
+from bayes_disc.cli import main
+from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
+from bayes_disc.physics import COEFFICIENT_NAMES
+
+CONFIG = """name: held
+flights:
+  - file: flights.csv
+markers:
+  "0": [0.100, 0.000, -0.015]
+  "1": [-0.0308, 0.0846, -0.015]
+  "2": [-0.0707, -0.0778, -0.015]
+least_squares: {starts: 1}
+output: out
+"""
+
+
+def _summary(folder, truth, scale=None):
+    scale = scale or {}
+    params = {n: {"q50": truth["coefficients"][n] * scale.get(n, 1.0)} for n in COEFFICIENT_NAMES}
+    folder.mkdir()
+    (folder / "summary.json").write_text(json.dumps({"parameters": params}))
+    return folder
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    d = tmp_path_factory.mktemp("predict")
+    f = LaunchSpec(name="held", speed=12.0, launch_angle_deg=5, alpha_deg=10, spin=55, duration=0.8, noise_mm=1.5)
+    write_synth(synthesize(SynthSpec(name="s", flights=(f,), seed=7)), d / "flights.csv", d / "truth.json")
+    (d / "config.yaml").write_text(CONFIG)
+    return d, json.loads((d / "truth.json").read_text())
+
+
+def test_right_coefficients_predict_as_well_as_a_free_fit_and_wrong_ones_do_not(data, capsys):
+    d, truth = data
+    right = _summary(d / "right", truth)
+    wrong = _summary(d / "wrong", truth, {"CLa": 1.3, "CMa": 1.3})
+    assert main(["predict", str(d / "config.yaml"), "--from", str(right), "--output", str(d / "p_right")]) == 0
+    assert main(["predict", str(d / "config.yaml"), "--from", str(wrong), "--output", str(d / "p_wrong")]) == 0
+    r = json.loads((d / "p_right" / "prediction.json").read_text())["flights"]["held"]
+    w = json.loads((d / "p_wrong" / "prediction.json").read_text())["flights"]["held"]
+    assert r["status"] == "ok" and set(r["channels"]) == {"markers"}
+    m = r["channels"]["markers"]
+    assert m["unit"] == "m"
+    assert m["rms_fixed"] < 1.05 * m["rms_free"]                     # the truth predicts like a free fit
+    assert abs(m["rms_free"] - 1.5e-3) < 0.2e-3                        # both at the noise level
+    bad = w["channels"]["markers"]
+    assert bad["rms_fixed"] > 2 * bad["rms_free"]                      # wrong ones do not (measured ×2.8)
+    assert "held: ok: markers RMS" in capsys.readouterr().out
+
+
+def test_a_run_with_another_model_is_refused(data, capsys):
+    d, truth = data
+    cfg = d / "config_side.yaml"
+    cfg.write_text(CONFIG + "physics: {side_force: {CY: 0.0}}\n")
+    assert main(["predict", str(cfg), "--from", str(_summary(d / "plain", truth))]) == 2
+    err = capsys.readouterr().err
+    assert "no parameter 'CY'" in err and len(err.strip().splitlines()) == 1
