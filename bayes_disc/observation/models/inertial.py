@@ -92,31 +92,47 @@ def low_pass(x, y0, tau, h):
     return out
 
 
-def fd_derivative(f: np.ndarray, h: float) -> np.ndarray:
+@nb.njit(cache=True)
+def fd_derivative(f, h):
     """Fourth-order finite-difference derivative along axis 1 of f (B, J, k) on a uniform grid h [s]
-    (one-sided fourth-order stencils at both ends)."""
+    (one-sided fourth-order stencils at both ends; J ≥ 5)."""
+    B, J, K = f.shape
     d = np.empty_like(f)
-    d[:, 2:-2] = (f[:, :-4] - 8 * f[:, 1:-3] + 8 * f[:, 3:-1] - f[:, 4:]) / (12 * h)
-    d[:, 0] = (-25 * f[:, 0] + 48 * f[:, 1] - 36 * f[:, 2] + 16 * f[:, 3] - 3 * f[:, 4]) / (12 * h)
-    d[:, 1] = (-3 * f[:, 0] - 10 * f[:, 1] + 18 * f[:, 2] - 6 * f[:, 3] + f[:, 4]) / (12 * h)
-    d[:, -1] = (25 * f[:, -1] - 48 * f[:, -2] + 36 * f[:, -3] - 16 * f[:, -4] + 3 * f[:, -5]) / (12 * h)
-    d[:, -2] = (3 * f[:, -1] + 10 * f[:, -2] - 18 * f[:, -3] + 6 * f[:, -4] - f[:, -5]) / (12 * h)
+    s = 1.0 / (12.0 * h)
+    for b in range(B):
+        for c in range(K):
+            for j in range(2, J - 2):
+                d[b, j, c] = (f[b, j - 2, c] - 8 * f[b, j - 1, c] + 8 * f[b, j + 1, c] - f[b, j + 2, c]) * s
+            d[b, 0, c] = (-25 * f[b, 0, c] + 48 * f[b, 1, c] - 36 * f[b, 2, c] + 16 * f[b, 3, c] - 3 * f[b, 4, c]) * s
+            d[b, 1, c] = (-3 * f[b, 0, c] - 10 * f[b, 1, c] + 18 * f[b, 2, c] - 6 * f[b, 3, c] + f[b, 4, c]) * s
+            d[b, J - 1, c] = (25 * f[b, J - 1, c] - 48 * f[b, J - 2, c] + 36 * f[b, J - 3, c]
+                              - 16 * f[b, J - 4, c] + 3 * f[b, J - 5, c]) * s
+            d[b, J - 2, c] = (3 * f[b, J - 1, c] + 10 * f[b, J - 2, c] - 18 * f[b, J - 3, c]
+                              + 6 * f[b, J - 4, c] - f[b, J - 5, c]) * s
     return d
 
 
-def interpolate(f: np.ndarray, h: float, t: np.ndarray) -> np.ndarray:
+@nb.njit(cache=True)
+def interpolate(f, h, t):
     """Cubic Lagrange interpolation of f (B, J, k) on the grid j·h at times t (B, n) [s] → (B, n, k);
     NaN where t lies outside the grid."""
-    B, J, _ = f.shape
-    u = t / h
-    j = np.clip(np.floor(u).astype(np.intp) - 1, 0, J - 4)
-    s = u - j                                          # position relative to node j, in [1, 2) inside
-    w = np.stack([-(s - 1) * (s - 2) * (s - 3) / 6, s * (s - 2) * (s - 3) / 2,
-                  -s * (s - 1) * (s - 3) / 2, s * (s - 1) * (s - 2) / 6], axis=-1)      # (B, n, 4)
-    rows = np.arange(B)[:, None, None]
-    nodes = f[rows, j[..., None] + np.arange(4)]                                          # (B, n, 4, k)
-    out = np.einsum("bnp,bnpk->bnk", w, nodes)
-    out[(t < 0) | (t > (J - 1) * h)] = np.nan
+    B, J, K = f.shape
+    n = t.shape[1]
+    out = np.empty((B, n, K))
+    for b in range(B):
+        for i in range(n):
+            u = t[b, i] / h
+            if not (u >= 0.0 and u <= J - 1):
+                out[b, i, :] = np.nan
+                continue
+            j = min(max(int(np.floor(u)) - 1, 0), J - 4)
+            s = u - j
+            w0 = -(s - 1) * (s - 2) * (s - 3) / 6
+            w1 = s * (s - 2) * (s - 3) / 2
+            w2 = -s * (s - 1) * (s - 3) / 2
+            w3 = s * (s - 1) * (s - 2) / 6
+            for c in range(K):
+                out[b, i, c] = w0 * f[b, j, c] + w1 * f[b, j + 1, c] + w2 * f[b, j + 2, c] + w3 * f[b, j + 3, c]
     return out
 
 
@@ -126,36 +142,67 @@ def sensor_rotation(tilt: np.ndarray) -> np.ndarray:
     return np.transpose(quat_to_matrix(quat_from_rotvec(rv)), (0, 2, 1))
 
 
-def specific_force_body(states: np.ndarray, h: float, g: float, r_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Body-frame angular velocity ω_B and specific force f_B at the sensor (module docstring).
+@nb.njit(cache=True)
+def sensor_signals(states, h, g, r_s, C):
+    """Gyro and unfiltered specific force in sensor axes (module docstring) along simulated states.
 
     Parameters
     ----------
     states : (B, J, 13) array
-        Simulated states on a uniform grid of step h [s].
+        States on a uniform grid of step h [s].
     h : float
         Grid step [s].
     g : float
         Gravitational acceleration [m/s²].
     r_s : (B, 3) array
         Sensor position in body axes [m].
+    C : (B, 3, 3) array
+        Body → sensor rotation.
 
     Returns
     -------
-    omega : (B, J, 3) array
-        ω_B [rad/s].
-    f : (B, J, 3) array
-        Specific force f_B [m/s²].
+    (B, J, 6) array
+        ω_s = C ω_B [rad/s] and C f_B [m/s²], f_B = Rᵀ(dv/dt + g ẑ) + ω̇_B × r_s + ω_B × (ω_B × r_s).
     """
-    w = states[..., 10:13]
-    a = fd_derivative(states[..., 3:6], h)
-    a[..., 2] += g
-    R = quat_to_matrix(states[..., 6:10])
-    f_cm = np.einsum("bjik,bji->bjk", R, a)                  # Rᵀ (dv/dt + g ẑ)
-    w_dot = fd_derivative(w, h)
-    r = r_s[:, None, :]
-    f = f_cm + np.cross(w_dot, r) + np.cross(w, np.cross(w, r))
-    return w, f
+    B, J, _ = states.shape
+    a = fd_derivative(states[:, :, 3:6].copy(), h)
+    wd = fd_derivative(states[:, :, 10:13].copy(), h)
+    out = np.empty((B, J, 6))
+    for b in range(B):
+        rx, ry, rz = r_s[b, 0], r_s[b, 1], r_s[b, 2]
+        for j in range(J):
+            qw, qx, qy, qz = states[b, j, 6], states[b, j, 7], states[b, j, 8], states[b, j, 9]
+            nq = 1.0 / np.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)
+            qw, qx, qy, qz = qw * nq, qx * nq, qy * nq, qz * nq
+            # R (body → world); f_cm = Rᵀ (a + g ẑ)
+            r00 = 1 - 2 * (qy * qy + qz * qz)
+            r01 = 2 * (qx * qy - qz * qw)
+            r02 = 2 * (qx * qz + qy * qw)
+            r10 = 2 * (qx * qy + qz * qw)
+            r11 = 1 - 2 * (qx * qx + qz * qz)
+            r12 = 2 * (qy * qz - qx * qw)
+            r20 = 2 * (qx * qz - qy * qw)
+            r21 = 2 * (qy * qz + qx * qw)
+            r22 = 1 - 2 * (qx * qx + qy * qy)
+            ax, ay, az = a[b, j, 0], a[b, j, 1], a[b, j, 2] + g
+            fx = r00 * ax + r10 * ay + r20 * az
+            fy = r01 * ax + r11 * ay + r21 * az
+            fz = r02 * ax + r12 * ay + r22 * az
+            wx, wy, wz = states[b, j, 10], states[b, j, 11], states[b, j, 12]
+            dx, dy, dz = wd[b, j, 0], wd[b, j, 1], wd[b, j, 2]
+            # ω̇ × r
+            fx += dy * rz - dz * ry
+            fy += dz * rx - dx * rz
+            fz += dx * ry - dy * rx
+            # ω × (ω × r)
+            cx, cy, cz = wy * rz - wz * ry, wz * rx - wx * rz, wx * ry - wy * rx
+            fx += wy * cz - wz * cy
+            fy += wz * cx - wx * cz
+            fz += wx * cy - wy * cx
+            for i in range(3):
+                out[b, j, i] = C[b, i, 0] * wx + C[b, i, 1] * wy + C[b, i, 2] * wz
+                out[b, j, 3 + i] = C[b, i, 0] * fx + C[b, i, 1] * fy + C[b, i, 2] * fz
+    return out
 
 
 @dataclass(eq=False)
@@ -253,14 +300,12 @@ class InertialMeasurements(ObservationModel):
         """(B, n, 6) predicted gyro [rad/s] and accelerometer [m/s²] at the log's samples; NaN for a
         parameter vector whose samples fall beyond the simulated grid or whose τ is not positive."""
         p = self.split(extra)
-        w, f = specific_force_body(trajectories.states, self.h, self.g, p["r_s"])
-        C = sensor_rotation(p["tilt"])
-        ws = np.einsum("bik,bjk->bji", C, w)
-        fs = np.einsum("bik,bjk->bji", C, f)
+        x = sensor_signals(np.ascontiguousarray(trajectories.states), self.h, self.g,
+                           np.ascontiguousarray(p["r_s"]), np.ascontiguousarray(sensor_rotation(p["tilt"])))
         tau = np.where(p["tau"] > 0, p["tau"], np.nan)
-        y = low_pass(np.ascontiguousarray(fs), np.ascontiguousarray(p["y0"]), np.nan_to_num(tau, nan=1.0), self.h)
-        t = self.sample_times_for(p["period"])
-        out = interpolate(np.concatenate([ws, y], axis=2), self.h, t)
+        x[..., 3:] = low_pass(np.ascontiguousarray(x[..., 3:]), np.ascontiguousarray(p["y0"]),
+                              np.nan_to_num(tau, nan=1.0), self.h)
+        out = interpolate(x, self.h, np.ascontiguousarray(self.sample_times_for(p["period"])))
         out[..., :3] += p["b_g"][:, None, :]
         out[..., 3:] += p["b_a"][:, None, :]
         out[~np.isfinite(tau)] = np.nan
