@@ -66,7 +66,7 @@ def kernel_key(source: KernelSource) -> str:
     OSError
         If the source of a module the kernel imports is not available.
     """
-    from .. import __version__
+    from .._version import __version__
     h = hashlib.sha256()
     modules = {arctan.__name__: arctan}
     for hook in source.hooks:
