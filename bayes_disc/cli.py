@@ -146,7 +146,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-sample", action="store_true",
                    help="least-squares estimates only (no emcee resampling with the accepted terms)")
     p.add_argument("--processes", type=_positive_int, default=2, help="parallel candidate fits (default 2)")
-    p.add_argument("--output", help="override the config's output folder")
+    p.add_argument("--output", metavar="DIR",
+                   help="override the config's output folder; the rebuilt report then goes to DIR/reports/<name>.html")
     p.add_argument("--no-progress", action="store_true", help="no progress bar while resampling")
     p.set_defaults(func=_cmd_diagnose)
     _register_optional(sub, common)
