@@ -419,6 +419,7 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
         starts = _fresh_start(independence, settings, problem, nw)[1] if min(steps) == 0 else [None] * len(paths)
         starts = [s if k == 0 else None for s, k in zip(starts, steps)]
         history.append({"steps": done, "resumed": True, "ensemble_steps": steps})
+        hist_path.write_text(json.dumps(history, indent=1))
     else:
         for p in paths:
             p.unlink(missing_ok=True)
