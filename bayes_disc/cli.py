@@ -53,7 +53,8 @@ def _cmd_sample(args) -> int:
     from . import pipeline
     from .inference.config import load_config
     cfg = load_config(args.config, output_override=args.output)
-    summary = pipeline.sample(cfg, resume=args.resume, progress=not args.no_progress).result
+    summary = pipeline.sample(cfg, resume=args.resume, progress=not args.no_progress,
+                              reports_dir=pipeline.reports_dir(args.output)).result
     return 0 if summary["convergence"]["converged"] or not args.strict else 3
 
 
@@ -69,7 +70,8 @@ def _cmd_diagnose(args) -> int:
     from . import pipeline
     from .inference.config import load_config
     cfg = load_config(args.config, output_override=args.output)
-    pipeline.diagnose(cfg, sample=not args.no_sample, processes=args.processes, progress=not args.no_progress)
+    pipeline.diagnose(cfg, sample=not args.no_sample, processes=args.processes, progress=not args.no_progress,
+                      reports_dir=pipeline.reports_dir(args.output))
     return 0
 
 
@@ -125,11 +127,17 @@ def build_parser() -> argparse.ArgumentParser:
                        description="The main job: joint least squares, then emcee ensembles, over the ten "
                                    "coefficients and every flight's initial conditions. Writes summary.json, "
                                    "posterior.nc, least_squares.json, profiles.json, run_info.json and chains/ in the "
-                                   "output folder, and reports/<name>.html (docs/outputs.md).")
+                                   "output folder, and the report reports/<name>.html: in the working directory, "
+                                   "or with --output DIR in DIR/reports/ (docs/outputs.md).")
     p.add_argument("config", help="run configuration YAML (keys: docs/configuration.md)")
-    p.add_argument("--resume", action="store_true", help="continue an interrupted run from its chain files")
-    p.add_argument("--output", help="override the config's output folder")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted run from its chain files (same configuration; the saved least "
+                        "squares and proposals are reused)")
+    p.add_argument("--output", metavar="DIR",
+                   help="override the config's output folder; the report then goes to DIR/reports/<name>.html")
+    p.add_argument("--no-progress", action="store_true",
+                   help="no progress bars (stages and convergence checks are logged instead; bars are shown "
+                        "only on a terminal)")
     p.add_argument("--strict", action="store_true", help="exit 3 if the cap is reached before convergence")
     p.set_defaults(func=_cmd_sample)
     p = sub.add_parser("identifiability", parents=[common],
@@ -153,7 +161,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-sample", action="store_true",
                    help="least-squares estimates only (no emcee resampling with the accepted terms)")
     p.add_argument("--processes", type=_positive_int, default=2, help="parallel candidate fits (default 2)")
-    p.add_argument("--output", help="override the config's output folder")
+    p.add_argument("--output", metavar="DIR",
+                   help="override the config's output folder; the rebuilt report then goes to DIR/reports/<name>.html")
     p.add_argument("--no-progress", action="store_true", help="no progress bar while resampling")
     p.set_defaults(func=_cmd_diagnose)
     p = sub.add_parser("predict", parents=[common],

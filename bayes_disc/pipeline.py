@@ -14,13 +14,40 @@ from pathlib import Path
 from .diagnostics.diagnosis import run_diagnose
 from .diagnostics.run import run_identifiability
 from .inference.config import RunConfig
-from .inference.run import run_sample
+from .inference.run import run_sample, stage
 from .report import build_report
 
 logger = logging.getLogger(__name__)
 
 #: where ``reports/<name>.html`` goes by default (relative to the working directory, SPEC §6)
 DEFAULT_REPORTS_DIR = Path("reports")
+#: sub-folder of an ``--output DIR`` that holds the report when the output folder is given explicitly
+RUN_REPORTS_DIR = "reports"
+
+
+def reports_dir(output=None) -> Path:
+    """Folder of a run's HTML report ``<name>.html``, as the command line chooses it.
+
+    Without ``--output`` the report is ``reports/<name>.html`` in the working directory (SPEC §6); with
+    ``--output DIR`` it goes with the run, ``DIR/reports/<name>.html``, so that a run written elsewhere
+    never overwrites the working directory's reports (such as the repository's committed demo report).
+
+    Parameters
+    ----------
+    output : str or Path, optional
+        The ``--output`` folder given on the command line, or None.
+
+    Returns
+    -------
+    Path
+        The folder (relative paths: to the working directory).
+    """
+    return DEFAULT_REPORTS_DIR if output is None else Path(output) / RUN_REPORTS_DIR
+
+
+def _report(run_dir, reports: Path, seed: int) -> Path:
+    with stage("report", f"HTML into {Path(reports)}/, figures into {Path(run_dir) / 'figures'}/"):
+        return build_report(run_dir, reports_dir=Path(reports), seed=seed)
 
 
 @dataclass(frozen=True)
@@ -50,11 +77,12 @@ def sample(cfg: RunConfig, *, resume: bool = False, progress: bool = True, repor
     resume : bool
         Continue an interrupted run from its chain files.
     progress : bool
-        Show a progress bar while sampling.
+        Show progress bars (least-squares starts and stages are logged in any case).
     report : bool
         Build the HTML report after sampling.
     reports_dir : str or Path
-        Folder of the HTML report (relative: to the working directory).
+        Folder of the HTML report (relative: to the working directory); the command line passes
+        :func:`reports_dir` of its ``--output``.
 
     Returns
     -------
@@ -63,7 +91,7 @@ def sample(cfg: RunConfig, *, resume: bool = False, progress: bool = True, repor
     """
     logger.debug(f"sample: configuration {cfg.path}, output {cfg.output}")
     summary = run_sample(cfg, resume=resume, progress=progress)
-    path = build_report(cfg.output, reports_dir=Path(reports_dir), seed=cfg.sampler.seed) if report else None
+    path = _report(cfg.output, reports_dir, cfg.sampler.seed) if report else None
     return Outcome(summary, path)
 
 
@@ -120,7 +148,7 @@ def diagnose(cfg: RunConfig, *, sample: bool = True, processes: int = 2, progres
     path = None
     if report:
         if (out / "summary.json").is_file() and (out / "posterior.nc").is_file():
-            path = build_report(out, reports_dir=Path(reports_dir), seed=cfg.sampler.seed)
+            path = _report(out, reports_dir, cfg.sampler.seed)
         else:
             logger.info(f"no sampled run in {out}: run `bayes-disc sample {cfg.path}` for the HTML report "
                         "(it then includes this diagnosis)")

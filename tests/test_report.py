@@ -236,7 +236,7 @@ def test_diagnosis_adds_its_section_with_before_after_figure(tiny, tmp_path):
         assert main(["diagnose", str(tiny["dir"] / "config.yaml"), "--no-sample", "--processes", "1",
                      "--output", str(out)]) == 0
     diagnosis = json.loads((out / "diagnosis.json").read_text())
-    html = (tmp_path / "reports" / "tiny.html").read_text(encoding="utf-8")
+    html = (out / "reports" / "tiny.html").read_text(encoding="utf-8")    # --output DIR: DIR/reports/
     doc = _parse(html)
     assert "missing-physics" in doc.section_ids and not doc.errors
     section = html[html.index('<section id="missing-physics">'):]

@@ -93,15 +93,42 @@ def _starts(problem: Problem, n: int, rng: np.random.Generator) -> list[np.ndarr
 
 def fit_least_squares(problem: Problem, starts: int = 4, max_nfev: int = 200, seed: int = 0,
                       sigma0: float | None = None, progress=None) -> LeastSquaresResult:
+    """Joint least squares from several starts; the best is refined with per-flight noise scales.
+
+    Parameters
+    ----------
+    problem : Problem
+        The run's statistical problem.
+    starts : int
+        Number of starts (the data-derived start, the literature coefficient sets, perturbations).
+    max_nfev : int
+        Evaluation budget of each fit.
+    seed : int
+        Seed of the perturbed starts.
+    sigma0 : float, optional
+        Noise scale assumed for every group during the starts (default: each observation model's
+        nominal noise, e.g. 2 mm for markers).
+    progress : callable, optional
+        Called as ``progress(done, total, cost)`` after each start (``cost``: its final ½ Σ whitened
+        residual²), and ``progress(total, total, None)`` before the final refinement.
+
+    Returns
+    -------
+    LeastSquaresResult
+        The optimum, noise scales [m], covariance, cost and condition number.
+    """
     rng = np.random.default_rng(seed)
     sigma = problem.nominal_noise if sigma0 is None else np.full(problem.n_groups, sigma0)
     results = []
-    for i, x0 in enumerate(_starts(problem, starts, rng)):
+    x0s = _starts(problem, starts, rng)
+    for i, x0 in enumerate(x0s):
         res = least_squares(whitened_residuals, x0, jac=whitened_jacobian, args=(problem, sigma), method="trf",
                             x_scale=problem.prior_sd, max_nfev=max_nfev, xtol=1e-10, ftol=1e-10)
         results.append(res)
         if progress is not None:
-            progress(i, res.cost)
+            progress(i + 1, len(x0s), float(res.cost))
+    if progress is not None:
+        progress(len(x0s), len(x0s), None)
     best = min(results, key=lambda r: r.cost)
     out = refine_least_squares(problem, best.x, max_nfev=max_nfev)
     out.start_costs = [float(r.cost) for r in results]

@@ -159,15 +159,50 @@ def _profile_task(index: int) -> ProfilePath:
 
 
 def profile_paths(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov_hat: np.ndarray, indices,
-                  processes: int = 1, **kwargs) -> list[ProfilePath]:
-    """Profiles of several parameters, in ``processes`` forked worker processes (independent fits)."""
+                  processes: int = 1, progress=None, **kwargs) -> list[ProfilePath]:
+    """Profiles of several parameters, in ``processes`` forked worker processes (independent fits).
+
+    Parameters
+    ----------
+    problem : Problem
+        The run's statistical problem.
+    theta_hat : ndarray, shape (dim,)
+        The least-squares optimum.
+    sigma : ndarray, shape (n_groups,)
+        Noise scale per noise group [m], held fixed.
+    cov_hat : ndarray, shape (dim, dim)
+        Gauss–Newton covariance at the optimum.
+    indices : iterable of int
+        Parameters to profile.
+    processes : int
+        Worker processes.
+    progress : callable, optional
+        Called as ``progress(path, done, total)`` after each profile is finished, in the order of
+        ``indices``.
+    **kwargs
+        Passed to :func:`profile_path`.
+
+    Returns
+    -------
+    list of ProfilePath
+        One per index, in the order of ``indices``.
+    """
     indices = list(indices)
     _POOL.update(problem=problem, theta=theta_hat, sigma=sigma, cov=cov_hat, kwargs=kwargs)
+    out: list[ProfilePath] = []
+
+    def collect(paths) -> list[ProfilePath]:
+        for path in paths:
+            out.append(path)
+            if progress is not None:
+                progress(path, len(out), len(indices))
+        return out
+
     try:
         if processes <= 1 or len(indices) <= 1:
-            return [_profile_task(i) for i in indices]
+            return collect(_profile_task(i) for i in indices)
         with mp_context().Pool(min(processes, len(indices)), initializer=_init_profile_worker,
                                initargs=(dict(_POOL),)) as pool:
-            return pool.map(_profile_task, indices)
+            return collect(pool.imap(_profile_task, indices))
     finally:
         _POOL.clear()

@@ -2,32 +2,82 @@
 
 Writes summary.json, posterior.nc, run_info.json and the least-squares result into the run's output folder.
 The HTML report is not this module's business: :mod:`bayes_disc.pipeline` runs this job, then the report.
-Progress goes to the module's logger (INFO); the results table and the convergence line are INFO records
-marked ``result=True`` (the command line prints those on stdout).
+Progress goes to the module's logger (INFO): a line when each stage starts and one when it ends, with
+its duration (:func:`stage`); a line per least-squares start; a bar over the profile likelihoods and one
+of the progress toward convergence while sampling (on a terminal; log lines otherwise). The results
+table and the convergence line are INFO records marked ``result=True`` (the command line prints those
+on stdout).
+
+``resume=True`` continues from the chain files (:func:`.sampler.run_sampler`) with the saved least-squares
+result and proposals; it refuses a configuration that no longer describes the saved run
+(:func:`check_same_run`).
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import time
 from dataclasses import asdict
 from pathlib import Path
 from types import MappingProxyType
+from typing import Iterator
 
 import numpy as np
 
+from ..observation.config_io import ConfigError
 from .config import RunConfig
 from .data import build_problem
 from .leastsq import fit_least_squares
 from .results import build_inference_data, build_summary, format_table
 from .profile import profile_paths
 from .proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
-from .sampler import run_sampler
+from .sampler import n_walkers, run_sampler, saved_steps
 from .versions import software_versions
 
 logger = logging.getLogger(__name__)
 #: ``extra`` of log records that are results (tables), not progress
 RESULT = MappingProxyType({"result": True})
+#: what a run's chains were sampled for (written before sampling, checked on resume), in ``<output>/chains``
+RUN_KEY = "run_key.json"
+#: sampler settings that may change on resume (the stopping rule, the cap, parallelism)
+RESUMABLE_SETTINGS = ("max_steps", "check_every", "min_steps", "n_tau", "rhat", "ess", "processes")
+#: least-squares files a resume reuses
+LEAST_SQUARES_FILES = ("least_squares.json", "least_squares_theta.npy", "least_squares_cov.npy")
+
+
+class Stage:
+    """A stage of a job, timed from its creation; ``result`` is added to the line logged at its end."""
+
+    def __init__(self, name: str):
+        self.name, self.result, self.t0 = name, "", time.perf_counter()
+
+    @property
+    def elapsed(self) -> float:
+        """Seconds since the stage started."""
+        return time.perf_counter() - self.t0
+
+
+@contextlib.contextmanager
+def stage(name: str, what: str = "") -> Iterator[Stage]:
+    """Log (INFO) the start of a stage, and its end with the duration and the stage's ``result``.
+
+    Parameters
+    ----------
+    name : str
+        The stage, e.g. ``"least squares"``.
+    what : str
+        Details for the start line.
+
+    Yields
+    ------
+    Stage
+        Set ``.result`` to words for the end line. When the block raises, no end line is logged.
+    """
+    logger.info(f"{name}{': ' + what if what else ''} …")
+    s = Stage(name)
+    yield s
+    logger.info(f"{name} done in {s.elapsed:.1f} s" + (f": {s.result}" if s.result else ""))
 
 
 def _flight_info(problem) -> dict:
@@ -35,7 +85,116 @@ def _flight_info(problem) -> dict:
                      "t_start": float(f.times[0]), "t_end": float(f.times[-1])} for f in problem.flights}
 
 
-def posterior_approximation(problem, ls, processes: int, out: Path):
+def run_key(cfg: RunConfig, problem) -> dict:
+    """What a run's chains were sampled for: parameters, flights, markers, prior and the sampler settings
+    that shape the chains (everything but :data:`RESUMABLE_SETTINGS`).
+
+    Parameters
+    ----------
+    cfg : RunConfig
+        The run configuration.
+    problem : Problem
+        Its statistical problem.
+
+    Returns
+    -------
+    dict
+        JSON-serialisable; two runs may share chain files only when their keys are equal.
+    """
+    flights = {name: {k: v for k, v in f.items() if k != "file"} for name, f in _flight_info(problem).items()}
+    settings = {k: v for k, v in asdict(cfg.sampler).items() if k not in RESUMABLE_SETTINGS}
+    settings["walkers"] = n_walkers(cfg.sampler, problem.dim)
+    return json.loads(json.dumps({"parameters": list(problem.names), "flights": flights,
+                                  "markers": cfg.markers, "prior": cfg.prior, "sampler": settings}))
+
+
+def check_same_run(cfg: RunConfig, problem, out: Path) -> None:
+    """Refuse to resume when the configuration no longer describes the run saved in ``out``.
+
+    Parameters
+    ----------
+    cfg : RunConfig
+        The configuration given with ``--resume``.
+    problem : Problem
+        Its statistical problem.
+    out : Path
+        The run folder (``chains/run_key.json``).
+
+    Raises
+    ------
+    ConfigError
+        Naming what differs (flights, parameters, markers, prior, sampler settings), or that the folder
+        does not record what its chains were sampled for.
+    """
+    path = Path(out) / "chains" / RUN_KEY
+    if not path.is_file():
+        raise ConfigError(cfg.path, None, f"cannot resume: {path} is missing, so the chains in {path.parent} "
+                                          "cannot be checked against this configuration (run without --resume)")
+    saved, now = json.loads(path.read_text()), run_key(cfg, problem)
+    differ = [k for k in now if saved.get(k) != now[k]]
+    if not differ:
+        return
+    words = []
+    for k in differ:
+        a, b = saved.get(k), now[k]
+        if k == "flights":
+            words.append(f"flights (saved run: {', '.join(a or {})}; now: {', '.join(b)}"
+                         + ("; same names, different data or time windows" if list(a or {}) == list(b) else "")
+                         + ")")
+        elif k == "parameters":
+            extra, gone = sorted(set(b) - set(a or [])), sorted(set(a or []) - set(b))
+            words.append("parameters (" + "; ".join(
+                ([f"new: {', '.join(extra)}"] if extra else []) + ([f"gone: {', '.join(gone)}"] if gone else [])
+                or ["order changed"]) + ")")
+        elif k == "sampler":
+            keys = sorted(x for x in set(a or {}) | set(b) if (a or {}).get(x) != b.get(x))
+            words.append("sampler settings " + ", ".join(f"{x} {(a or {}).get(x)} → {b.get(x)}" for x in keys))
+        else:
+            words.append(f"{k} ({a} → {b})")
+    raise ConfigError(cfg.path, None, f"cannot resume the run in {out}: the configuration changed since it was "
+                                      f"sampled: {'; '.join(words)} (run without --resume to start again)")
+
+
+def saved_least_squares(out: Path) -> dict | None:
+    """The least-squares result saved in a run folder (``least_squares.json``), when it and the optimum and
+    covariance files (``least_squares_theta.npy``, ``least_squares_cov.npy``) are all there.
+
+    Parameters
+    ----------
+    out : Path
+        The run folder.
+
+    Returns
+    -------
+    dict or None
+        The content of ``least_squares.json``; None when a file is missing.
+    """
+    out = Path(out)
+    if not all((out / f).is_file() for f in LEAST_SQUARES_FILES):
+        return None
+    return json.loads((out / "least_squares.json").read_text())
+
+
+def _least_squares(problem, cfg: RunConfig, out: Path):
+    with stage("least squares", f"{cfg.least_squares.starts} start(s), ≤ {cfg.least_squares.max_nfev} "
+                                "evaluations each") as st:
+        def report(done, total, cost):
+            if cost is None:
+                logger.info(f"least squares: refining the best start with per-flight noise scales ({st.elapsed:.0f} s)")
+            else:
+                logger.info(f"least squares: start {done}/{total} cost {cost:.1f} ({st.elapsed:.0f} s)")
+        ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
+                               seed=cfg.sampler.seed, progress=report)
+        ls_dict = ls.to_dict()
+        (out / "least_squares.json").write_text(json.dumps(ls_dict, indent=1))
+        np.save(out / "least_squares_cov.npy", ls.cov)
+        np.save(out / "least_squares_theta.npy", ls.theta)
+        st.result = (f"cost {ls.cost:.1f}, condition number {ls.condition_number:.3g}, RMS "
+                     + ", ".join(f"{k} {v:.2f} mm" for k, v in ls_dict["rms_mm"].items()))
+    return ls, ls_dict
+
+
+def posterior_approximation(problem, ls, processes: int, out: Path, progress: bool = False):
     """Profile paths of the coefficients through the least-squares optimum and the ridge-aware
     independence proposal built from them (:func:`.proposals.independence_proposal`).
 
@@ -49,28 +208,48 @@ def posterior_approximation(problem, ls, processes: int, out: Path):
         Parallel profile fits.
     out : Path
         Run folder; the paths are written to ``<out>/profiles.json``.
+    progress : bool
+        A bar over the coefficients (on a terminal); otherwise a log line per finished profile.
 
     Returns
     -------
     CompositeProposal
         The independence proposal for the sampler.
     """
-    t0 = time.perf_counter()
+    from tqdm import tqdm
     idx = range(problem.n_coef + problem.n_ext)
-    paths = profile_paths(problem, ls.theta, ls.sigma, ls.cov, idx, processes=processes)
-    proposal = independence_proposal(problem, ls.theta, ls.cov, paths)
-    record = {}
-    for path in paths:
-        dep = path_departure(path, ls.theta, ls.cov)
-        record[path.name] = {"value": [p.value for p in path.points], "t": path.t.tolist(),
-                             "deviance": path.deviance.tolist(), "departure_from_laplace": dep,
-                             "shape": path.classify()}
-    (out / "profiles.json").write_text(json.dumps(record, indent=1))
-    ridge = [n for n, r in record.items() if r["departure_from_laplace"] > PROFILE_DEPARTURE]
-    logger.info(f"profile likelihood of {len(paths)} coefficients ({time.perf_counter() - t0:.0f} s): "
-        + (f"non-Gaussian along {', '.join(ridge)}; " if ridge else "all close to Gaussian; ")
-        + f"{len(proposal.parts) - 1} ridge proposal(s)")
+    with stage("profile likelihoods", f"{len(idx)} coefficients in {processes} process(es)") as st:
+        bar = tqdm(total=len(idx), desc="profiles", unit="coefficient", leave=False,
+                   disable=None if progress else True)
+
+        def report(path, done, total):
+            bar.set_postfix_str(path.name, refresh=False)
+            bar.update(1)
+            if bar.disable:
+                logger.info(f"profile likelihood {done}/{total}: {path.name}, {len(path.points)} points, "
+                            f"{path.classify()} ({st.elapsed:.0f} s)")
+        try:
+            paths = profile_paths(problem, ls.theta, ls.sigma, ls.cov, idx, processes=processes, progress=report)
+        finally:
+            bar.close()
+        proposal = independence_proposal(problem, ls.theta, ls.cov, paths)
+        record = {}
+        for path in paths:
+            dep = path_departure(path, ls.theta, ls.cov)
+            record[path.name] = {"value": [p.value for p in path.points], "t": path.t.tolist(),
+                                 "deviance": path.deviance.tolist(), "departure_from_laplace": dep,
+                                 "shape": path.classify()}
+        (out / "profiles.json").write_text(json.dumps(record, indent=1))
+        ridge = [n for n, r in record.items() if r["departure_from_laplace"] > PROFILE_DEPARTURE]
+        st.result = ((f"non-Gaussian along {', '.join(ridge)}; " if ridge else "all close to Gaussian; ")
+                     + f"{len(proposal.parts) - 1} ridge proposal(s)")
     return proposal
+
+
+def _resume_message(name: str, steps: list) -> str:
+    n = max(steps)
+    text = (f"resuming {name} from step {n} of each ensemble (ensembles at {', '.join(map(str, steps))} steps")
+    return text + (f"; the shorter ones are first advanced to {n})" if min(steps) < n else ")")
 
 
 def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> dict:
@@ -81,9 +260,12 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
     cfg : RunConfig
         The validated run configuration; files go to ``cfg.output``.
     resume : bool
-        Continue an interrupted run from its chain files.
+        Continue an interrupted run from its chain files: the saved least-squares result and proposals
+        are reused (least squares is recomputed, with a warning, only when its files are missing), every
+        ensemble is brought to the same number of steps, and the sampler's history is extended. A
+        folder without chain files starts afresh (with a warning).
     progress : bool
-        Show a progress bar while sampling.
+        Show progress bars (on a terminal only; log lines otherwise).
 
     Returns
     -------
@@ -91,36 +273,60 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
         The content of ``summary.json`` (SPEC §6): ``parameters`` ({name: {mean, sd, q05, q50, q95, r_hat,
         ess_bulk}}, coefficients dimensionless, ``sigma_<flight>`` in m, initial conditions in SI units),
         ``convergence`` and the run's description.
+
+    Raises
+    ------
+    ConfigError
+        On resume, when the configuration no longer describes the saved run.
     """
     t0 = time.perf_counter()
     out = Path(cfg.output)
     out.mkdir(parents=True, exist_ok=True)
-    problem = build_problem(cfg)
-    logger.info(f"{cfg.name}: {problem.n_flights} flights, {int(problem.n_coords.sum() // 3)} marker points, "
-        f"{problem.dim} parameters")
-    ls_path = out / "least_squares.json"
-    ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
-                           seed=cfg.sampler.seed)
-    ls_dict = ls.to_dict()
-    ls_path.write_text(json.dumps(ls_dict, indent=1))
-    np.save(out / "least_squares_cov.npy", ls.cov)
-    np.save(out / "least_squares_theta.npy", ls.theta)
-    logger.info(f"least squares: cost {ls.cost:.1f}, condition number {ls.condition_number:.3g}, RMS "
-        + ", ".join(f"{k} {v:.2f} mm" for k, v in ls_dict["rms_mm"].items()))
-    if resume and (out / "chains" / "independence.npz").is_file():
+    with stage("reading flights and checks") as st:
+        problem = build_problem(cfg)
+        st.result = (f"{cfg.name}: {problem.n_flights} flights, {int(problem.n_coords.sum() // 3)} marker points, "
+                     f"{problem.dim} parameters")
+    if resume and (out / "chains" / RUN_KEY).is_file():
+        check_same_run(cfg, problem, out)       # before counting chain files: the ensembles may differ
+    steps = saved_steps(out, cfg.sampler.ensembles) if resume else None
+    if resume and steps is None:
+        logger.warning(f"--resume: no chain files in {out / 'chains'}; starting a fresh run")
+    if steps is not None:
+        check_same_run(cfg, problem, out)
+        logger.info(_resume_message(cfg.name, steps))
+        ls_dict = saved_least_squares(out)
+        if ls_dict is None:
+            logger.warning(f"resume: the least-squares files ({', '.join(LEAST_SQUARES_FILES)}) are not all in "
+                           f"{out}; recomputing least squares")
+            _, ls_dict = _least_squares(problem, cfg, out)
+        else:
+            logger.info(f"resume: reusing the saved least-squares optimum (cost {ls_dict['cost']:.1f}) and the "
+                        "proposals saved with the chains")
         proposal = None  # the sampler continues with the approximation saved beside its chains
     else:
-        proposal = posterior_approximation(problem, ls, cfg.sampler.processes, out)
-    chains = run_sampler(problem, proposal, cfg.sampler, out, resume=resume, progress=progress)
-    info = {"name": cfg.name, "config": str(cfg.path), "flights": _flight_info(problem),
-            "sampler_settings": asdict(cfg.sampler), "markers": cfg.markers}
-    idata = build_inference_data(problem, chains, np.random.default_rng(cfg.sampler.seed))
-    summary = build_summary(problem, chains, idata, ls_dict, info)
-    (out / "summary.json").write_text(json.dumps(summary, indent=1))
-    idata.to_netcdf(str(out / "posterior.nc"))
-    run_info = {"wall_time_s": time.perf_counter() - t0, "sampling_wall_time_s": chains.wall_time_s,
-                "history": chains.history, "versions": software_versions()}
-    (out / "run_info.json").write_text(json.dumps(run_info, indent=1))
+        ls, ls_dict = _least_squares(problem, cfg, out)
+        proposal = posterior_approximation(problem, ls, cfg.sampler.processes, out, progress=progress)
+        (out / "chains").mkdir(exist_ok=True)
+        (out / "chains" / RUN_KEY).write_text(json.dumps(run_key(cfg, problem), indent=1))
+    s = cfg.sampler
+    with stage("sampling", f"{s.ensembles} ensembles × {n_walkers(s, problem.dim)} walkers until R-hat < {s.rhat:g}, "
+                           f"ESS ≥ {s.ess:g}, N/τ ≥ {s.n_tau:g} (cap {s.max_steps} steps)") as st:
+        chains = run_sampler(problem, proposal, cfg.sampler, out, resume=steps is not None, progress=progress)
+        st.result = f"{chains.reason} at step {chains.total_steps}"
+    with stage("outputs", "summary.json, posterior.nc, run_info.json"):
+        info = {"name": cfg.name, "config": str(cfg.path), "flights": _flight_info(problem),
+                "sampler_settings": asdict(cfg.sampler), "markers": cfg.markers}
+        idata = build_inference_data(problem, chains, np.random.default_rng(cfg.sampler.seed))
+        summary = build_summary(problem, chains, idata, ls_dict, info)
+        (out / "summary.json").write_text(json.dumps(summary, indent=1))
+        idata.to_netcdf(str(out / "posterior.nc"))
+        previous = out / "run_info.json"
+        sessions = json.loads(previous.read_text()).get("sessions", []) if steps is not None and previous.is_file() else []
+        session = {"resumed_from_steps": steps, "total_steps": chains.total_steps,
+                   "wall_time_s": time.perf_counter() - t0}
+        run_info = {"wall_time_s": session["wall_time_s"], "sampling_wall_time_s": chains.wall_time_s,
+                    "history": chains.history, "sessions": sessions + [session], "versions": software_versions()}
+        previous.write_text(json.dumps(run_info, indent=1))
     logger.info(format_table(summary), extra=RESULT)
     c = summary["convergence"]
     logger.info(f"{c['reason']}: {c['total_steps']} steps × {c['walkers_per_ensemble']} walkers × {c['ensembles']} "

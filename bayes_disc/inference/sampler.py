@@ -29,6 +29,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,6 +41,8 @@ from ..physics.parallel import mp_context
 from .config import SamplerSettings
 from .model import Problem
 from .proposals import CompositeProposal, Proposal
+
+logger = logging.getLogger(__name__)
 
 #: re-fits of the pCN reference during warm-up
 ADAPTATIONS = 2
@@ -190,95 +193,319 @@ def convergence(chain: np.ndarray, settings: SamplerSettings, coef_idx: np.ndarr
             "ess_min_coef": float(np.min(ess[coef_idx])), "converged": bool(ok)}
 
 
+@dataclass(frozen=True)
+class Progress:
+    """Where the ensembles stand toward the stopping rule, as shown on the progress bar.
+
+    Attributes
+    ----------
+    steps : int
+        Steps done by every ensemble.
+    cap : int
+        The ``max_steps`` cap (shown, never used as a measure of progress).
+    fraction : float
+        Progress toward convergence in [0, 1] (:func:`convergence_fraction`); 0 during warm-up.
+    verdict : dict or None
+        The last convergence check (:func:`convergence`), None before the first.
+    """
+
+    steps: int
+    cap: int
+    fraction: float
+    verdict: dict | None
+
+    def describe(self, settings: SamplerSettings) -> str:
+        """One line: step counter with the cap, and each criterion's figure beside its target."""
+        head = f"step {self.steps} (cap {self.cap})"
+        if self.verdict is None:
+            return f"{head}, warm-up until step {warm_up_steps(settings)}"
+        v = self.verdict
+        return (f"{head}, R-hat {v['rhat_max']:.3f} (< {settings.rhat:g}), ESS {v['ess_min_coef']:.0f} "
+                f"(≥ {settings.ess:g}), N/τ {v['n_over_tau']:.1f} (≥ {settings.n_tau:g})")
+
+
+def warm_up_steps(settings: SamplerSettings) -> int:
+    """Steps before the first convergence check: the warm-up adaptations and one round of ``check_every``.
+
+    Parameters
+    ----------
+    settings : SamplerSettings
+        The sampler settings.
+
+    Returns
+    -------
+    int
+        Steps of every ensemble.
+    """
+    return settings.adapt_steps * ADAPTATIONS + settings.check_every
+
+
+def convergence_fraction(verdict: dict, settings: SamplerSettings, steps: int) -> float:
+    """How far the ensembles are toward the stopping rule: the worst of its criteria, each as a fraction.
+
+    R-hat: (rhat − 1) / (R-hat_max − 1) (1 when R-hat max reaches the target); ESS: min coefficient bulk
+    ESS / ``ess``; N/τ: (N/τ) / ``n_tau``; steps: ``steps`` / ``min_steps``. The rule is met exactly when
+    every fraction reaches 1 (R-hat strictly below its target), so the result is 1 only then.
+
+    Parameters
+    ----------
+    verdict : dict
+        A convergence check (:func:`convergence`): ``rhat_max``, ``ess_min_coef``, ``n_over_tau``,
+        ``converged``.
+    settings : SamplerSettings
+        Targets ``rhat``, ``ess``, ``n_tau``, ``min_steps``.
+    steps : int
+        Steps done by every ensemble.
+
+    Returns
+    -------
+    float
+        In [0, 1]; 1 if and only if ``verdict["converged"]``.
+    """
+    if verdict["converged"]:
+        return 1.0
+    excess = verdict["rhat_max"] - 1.0
+    parts = [(settings.rhat - 1.0) / excess if excess > 0 else (1.0 if excess <= 0 else np.nan),
+             verdict["ess_min_coef"] / settings.ess,
+             verdict["n_over_tau"] / settings.n_tau,
+             steps / max(settings.min_steps, 1)]
+    finite = [p if np.isfinite(p) else 0.0 for p in parts]
+    # not converged: at least one criterion is unmet, so stay below 1 even when rounding says otherwise
+    return float(min(min(finite), 0.999))
+
+
+def chain_paths(out_dir: Path, ensembles: int) -> list[Path]:
+    """The emcee chain files ``<out_dir>/chains/ensemble_<k>.h5`` of a run.
+
+    Parameters
+    ----------
+    out_dir : Path
+        The run's output folder.
+    ensembles : int
+        Number of ensembles.
+
+    Returns
+    -------
+    list of Path
+    """
+    return [Path(out_dir) / "chains" / f"ensemble_{e}.h5" for e in range(ensembles)]
+
+
+def saved_steps(out_dir: Path, ensembles: int) -> list[int] | None:
+    """Steps saved in each ensemble's chain file, when the run folder holds everything a resume needs.
+
+    Parameters
+    ----------
+    out_dir : Path
+        The run's output folder.
+    ensembles : int
+        Number of ensembles of the configuration.
+
+    Returns
+    -------
+    list of int or None
+        Steps per ensemble; None when no chain file exists.
+
+    Raises
+    ------
+    ValueError
+        Some but not all chain files, or the proposals saved beside them, are missing.
+    """
+    chain_dir = Path(out_dir) / "chains"
+    paths = chain_paths(out_dir, ensembles)
+    present = [p.exists() for p in paths]
+    if not any(present):
+        return None
+    missing = [p.name for p, ok in zip(paths, present) if not ok]
+    missing += [n for n in ("proposal.npz", "independence.npz") if not (chain_dir / n).exists()]
+    if missing:
+        raise ValueError(f"{chain_dir}: incomplete chain files (no {', '.join(missing)}); cannot resume "
+                         "(remove the folder to restart)")
+    return [int(emcee.backends.HDFBackend(str(p), read_only=True).iteration) for p in paths]
+
+
+def _fresh_start(independence: CompositeProposal, settings: SamplerSettings, problem: Problem, nw: int):
+    """The pCN reference and every ensemble's initial walkers, drawn in a fixed order from the seed (so
+    a resume can redraw the start of an ensemble that never saved a step)."""
+    rng = np.random.default_rng(settings.seed)
+    proposal = Proposal.from_cov(*independence.moments(np.random.RandomState(rng.integers(2**32))))
+    starts = [initial_walkers(independence, nw, problem, rng) for _ in range(settings.ensembles)]
+    return proposal, starts
+
+
+def _read_history(path: Path) -> list:
+    return json.loads(path.read_text()) if path.is_file() else []
+
+
+class _Bar:
+    """The convergence bar (tqdm; none when ``progress`` is False or stderr is not a terminal), and the
+    same figures as log lines when there is no bar."""
+
+    FORMAT = "{desc}: {percentage:3.0f}% of the way to convergence |{bar}|{postfix} [{elapsed}]"
+
+    def __init__(self, settings: SamplerSettings, progress: bool):
+        from tqdm import tqdm
+        self.settings = settings
+        self.bar = tqdm(total=100, desc="sampling", bar_format=self.FORMAT, leave=False,
+                        disable=None if progress else True)
+
+    @property
+    def shown(self) -> bool:
+        return not self.bar.disable
+
+    def show(self, state: Progress, checked: bool) -> None:
+        line = state.describe(self.settings)
+        if self.shown:
+            self.bar.n = int(round(100 * state.fraction))
+            self.bar.set_postfix_str(line, refresh=False)
+            self.bar.refresh()
+        if checked:
+            logger.log(logging.DEBUG if self.shown else logging.INFO,
+                       f"convergence check: {line}; {100 * state.fraction:.0f}% of the way")
+
+    def close(self) -> None:
+        self.bar.close()
+
+
 def run_sampler(problem: Problem, independence: CompositeProposal | None, settings: SamplerSettings, out_dir: Path,
                 resume: bool = False, progress: bool = True) -> Chains:
     """Run (or resume) the ensembles until converged or the cap; returns the post-burn-in chains.
-    ``independence``: the ridge-aware posterior approximation (:func:`.proposals.independence_proposal`)
-    that starts the walkers and proposes the independence jumps; on resume (None allowed) the one saved
-    with the chains is used."""
-    from tqdm import tqdm
+
+    Parameters
+    ----------
+    problem : Problem
+        The run's statistical problem.
+    independence : CompositeProposal or None
+        The ridge-aware posterior approximation (:func:`.proposals.independence_proposal`) that starts
+        the walkers and proposes the independence jumps; on resume (None allowed) the one saved with the
+        chains is used.
+    settings : SamplerSettings
+        Ensembles, walkers, stopping rule, cap, seed, processes.
+    out_dir : Path
+        The run's output folder; chain files, proposals and ``history.json`` go to ``<out_dir>/chains``.
+    resume : bool
+        Continue from the saved chain files: ensembles saved with fewer steps than the longest are first
+        advanced to its length, so that all ensembles have the same number of steps; the history saved
+        in ``chains/history.json`` is kept and extended.
+    progress : bool
+        Show a bar of the progress toward convergence (on a terminal only); otherwise the convergence
+        checks are logged (INFO).
+
+    Returns
+    -------
+    Chains
+        Post-burn-in samples of every ensemble (all of equal length) and the run's history.
+    """
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
     chain_dir = out_dir / "chains"
     chain_dir.mkdir(parents=True, exist_ok=True)
-    paths = [chain_dir / f"ensemble_{e}.h5" for e in range(settings.ensembles)]
-    prop_path, ind_path = chain_dir / "proposal.npz", chain_dir / "independence.npz"
+    paths = chain_paths(out_dir, settings.ensembles)
+    prop_path, ind_path, hist_path = chain_dir / "proposal.npz", chain_dir / "independence.npz", chain_dir / "history.json"
     nw = n_walkers(settings, problem.dim)
-    existing = [p.exists() for p in paths]
-    if resume and all(existing) and prop_path.exists() and ind_path.exists():
+    steps = saved_steps(out_dir, settings.ensembles) if resume else None
+    history: list = []
+    if steps is not None:
         proposal = Proposal.load(prop_path)
         independence = CompositeProposal.load(ind_path)
-        done = int(min(emcee.backends.HDFBackend(str(p), read_only=True).iteration for p in paths))
-        starts = [None] * len(paths)
+        for p in paths:
+            shape = emcee.backends.HDFBackend(str(p), read_only=True).shape
+            if tuple(shape) != (nw, problem.dim):
+                raise ValueError(f"{p}: chains of {shape[0]} walkers × {shape[1]} parameters, the configuration "
+                                 f"has {nw} × {problem.dim}; cannot resume (remove the folder to restart)")
+        history = _read_history(hist_path)
+        done = max(steps)
+        # an ensemble that never saved a step restarts from its original walkers (same seed, same draws)
+        starts = _fresh_start(independence, settings, problem, nw)[1] if min(steps) == 0 else [None] * len(paths)
+        starts = [s if k == 0 else None for s, k in zip(starts, steps)]
+        history.append({"steps": done, "resumed": True, "ensemble_steps": steps})
+        hist_path.write_text(json.dumps(history, indent=1))
     else:
-        if any(existing) and not resume:
-            for p in paths:
-                p.unlink(missing_ok=True)
-        if resume and any(existing):
-            raise ValueError(f"{chain_dir}: incomplete chain files; cannot resume (remove the folder to restart)")
+        for p in paths:
+            p.unlink(missing_ok=True)
+        hist_path.unlink(missing_ok=True)
         if independence is None:
             raise ValueError(f"{chain_dir}: nothing to resume; a fresh run needs the posterior approximation")
-        rng = np.random.default_rng(settings.seed)
-        proposal = Proposal.from_cov(*independence.moments(np.random.RandomState(rng.integers(2**32))))
+        proposal, starts = _fresh_start(independence, settings, problem, nw)
         proposal.save(prop_path)
         independence.save(ind_path)
-        starts = [initial_walkers(independence, nw, problem, rng) for _ in paths]
+        steps = [0] * len(paths)
         done = 0
+
+    def record(entry):
+        history.append(entry)
+        hist_path.write_text(json.dumps(history, indent=1))
+
     coef_idx = np.arange(problem.n_coef + problem.n_ext)
     adapt_at = [settings.adapt_steps * (i + 1) for i in range(ADAPTATIONS)]
-    history = []
     ctx = mp_context()
-    bar = tqdm(total=settings.max_steps, initial=done, desc="sampling", unit="step", disable=not progress,
-               leave=False)
-    verdict = {"converged": False, "burn": min(done, adapt_at[-1]), "tau": np.full((1, problem.dim), np.nan)}
+    bar = _Bar(settings, progress)
+    verdict = {"converged": False, "tau": np.full((1, problem.dim), np.nan)}
+    checked, fraction = None, 0.0
+    bar.show(Progress(done, settings.max_steps, 0.0, None), checked=False)
     finished = False
-    while not finished:
-        with ctx.Pool(min(settings.processes, settings.ensembles), initializer=_init_worker,
-                      initargs=(problem, proposal, independence, settings.independence_fraction)) as pool:
-            while True:
-                if done > 0 and proposal.adapted < ADAPTATIONS and done >= adapt_at[proposal.adapted]:
-                    chain, _, _ = _read(paths)
-                    lo = adapt_at[proposal.adapted - 1] if proposal.adapted else 0
-                    warm = chain[:, (lo + done) // 2: done].reshape(-1, problem.dim)
-                    proposal = proposal.refit(warm)
-                    proposal.save(prop_path)
-                    sub = warm[np.random.default_rng(settings.seed + done).choice(len(warm), min(len(warm), 4000),
-                                                                                 replace=False)]
-                    independence = independence.reweighted(sub)
-                    independence.save(ind_path)
-                    history.append({"steps": done, "adapted_proposal": proposal.adapted,
-                                    "independence_weights": np.exp(independence.log_weights).round(4).tolist()})
-                    break  # new pool with the new proposal
-                if done >= adapt_at[-1] + settings.check_every:
-                    chain, _, _ = _read(paths)
-                    verdict = convergence(chain, settings, coef_idx, min_burn=adapt_at[-1])
-                    history.append({"steps": done, **{k: v for k, v in verdict.items() if k != "tau"}})
-                    (chain_dir / "history.json").write_text(json.dumps(history, indent=1))
-                    bar.set_postfix(rhat=f"{verdict['rhat_max']:.3f}", ess=f"{verdict['ess_min_coef']:.0f}",
-                                    n_tau=f"{verdict['n_over_tau']:.0f}")
-                    if verdict["converged"]:
+    try:
+        while not finished:
+            with ctx.Pool(min(settings.processes, settings.ensembles), initializer=_init_worker,
+                          initargs=(problem, proposal, independence, settings.independence_fraction)) as pool:
+                if min(steps) < done:   # resumed with unequal ensembles: bring the shorter ones level first
+                    tasks = [(p, done - k, s, settings.seed * 1000 + e)
+                             for e, (p, s, k) in enumerate(zip(paths, starts, steps)) if k < done]
+                    pool.map(_advance, tasks)
+                    starts = [None] * len(paths)
+                    steps = [int(emcee.backends.HDFBackend(str(p), read_only=True).iteration) for p in paths]
+                    if min(steps) != done or max(steps) != done:
+                        raise RuntimeError(f"{chain_dir}: could not align the ensembles at step {done}: {steps}")
+                    record({"steps": done, "aligned": True, "ensemble_steps": steps})
+                while True:
+                    if done > 0 and proposal.adapted < ADAPTATIONS and done >= adapt_at[proposal.adapted]:
+                        chain, _, _ = _read(paths)
+                        lo = adapt_at[proposal.adapted - 1] if proposal.adapted else 0
+                        warm = chain[:, (lo + done) // 2: done].reshape(-1, problem.dim)
+                        proposal = proposal.refit(warm)
+                        proposal.save(prop_path)
+                        sub = warm[np.random.default_rng(settings.seed + done).choice(len(warm), min(len(warm), 4000),
+                                                                                     replace=False)]
+                        independence = independence.reweighted(sub)
+                        independence.save(ind_path)
+                        record({"steps": done, "adapted_proposal": proposal.adapted,
+                                "independence_weights": np.exp(independence.log_weights).round(4).tolist()})
+                        logger.debug(f"warm-up adaptation {proposal.adapted} of {ADAPTATIONS} at step {done}")
+                        break  # new pool with the new proposal
+                    if done >= adapt_at[-1] + settings.check_every and checked != done:
+                        chain, _, _ = _read(paths)
+                        verdict = convergence(chain, settings, coef_idx, min_burn=adapt_at[-1])
+                        checked, fraction = done, convergence_fraction(verdict, settings, done)
+                        record({"steps": done, **{k: v for k, v in verdict.items() if k != "tau"}})
+                        bar.show(Progress(done, settings.max_steps, fraction, verdict), checked=True)
+                        if verdict["converged"]:
+                            finished = True
+                            break
+                    if done >= settings.max_steps:
                         finished = True
                         break
-                if done >= settings.max_steps:
-                    finished = True
-                    break
-                n = min(settings.check_every, settings.max_steps - done)
-                if proposal.adapted < ADAPTATIONS:
-                    n = min(n, adapt_at[proposal.adapted] - done)
-                tasks = [(p, n, s, settings.seed * 1000 + e) for e, (p, s) in enumerate(zip(paths, starts))]
-                done = int(min(pool.map(_advance, tasks)))
-                starts = [None] * len(paths)
-                bar.update(n)
-    bar.close()
+                    n = min(settings.check_every, settings.max_steps - done)
+                    if proposal.adapted < ADAPTATIONS:
+                        n = min(n, adapt_at[proposal.adapted] - done)
+                    tasks = [(p, n, s, settings.seed * 1000 + e) for e, (p, s) in enumerate(zip(paths, starts))]
+                    steps = [int(k) for k in pool.map(_advance, tasks)]
+                    done = min(steps)
+                    starts = [None] * len(paths)
+                    bar.show(Progress(done, settings.max_steps, fraction, verdict if checked is not None else None),
+                             checked=False)
+    finally:
+        bar.close()
     chain, lp, acc, ss = _read(paths, blobs=True)
-    burn = verdict["burn"]
+    lengths = {int(emcee.backends.HDFBackend(str(p), read_only=True).iteration) for p in paths}
+    if len(lengths) != 1:
+        raise RuntimeError(f"{chain_dir}: ensembles of unequal length {sorted(lengths)} after sampling")
+    # no convergence check (the cap came during the warm-up): the warm-up is burn-in, at most half the chain
+    burn = verdict["burn"] if checked is not None else min(adapt_at[-1], chain.shape[1] // 2)
     sigma = problem.draw_sigma(ss[:, burn:].reshape(-1, problem.n_flights),
                                np.random.default_rng(settings.seed)).reshape(ss[:, burn:].shape)
     reason = ("converged" if verdict["converged"] else
               f"cap of {settings.max_steps} steps reached before convergence")
-    (out_dir / "chains" / "history.json").write_text(json.dumps(history, indent=1))
+    hist_path.write_text(json.dumps(history, indent=1))
     return Chains(chain=chain[:, burn:], log_prob=lp[:, burn:], sigma=sigma, acceptance=acc, burn=burn,
                   total_steps=chain.shape[1], tau=verdict["tau"], converged=verdict["converged"], reason=reason,
                   history=history, wall_time_s=time.perf_counter() - t_start)
-
-
