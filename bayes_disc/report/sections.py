@@ -1,7 +1,7 @@
 """The report as an ordered list of sections.
 
 A :class:`Section` is a self-contained block: an id (the HTML anchor; tests and links rely on it), a title,
-a one-line reading guide, an HTML body and its figures. A *section builder* is any callable
+a one-line reading guide (empty: none shown), an HTML body and its figures. A *section builder* is any callable
 ``builder(ctx) -> Section | None`` taking the :class:`~.context.ReportContext` of a run; ``None`` leaves the
 section out. :func:`.builders.default_builders` returns the standard list; a later capability adds its section by
 passing ``builders=default_builders() + [my_builder]`` (or inserting it where it belongs) to
@@ -59,6 +59,60 @@ def fmt(x, digits: int = 4) -> str:
     if not math.isfinite(xf):
         return "–"
     return f"{xf:.{digits}g}"
+
+
+#: a value smaller than this fraction of its scale is round-off of a zero (a truth of 1.8e-15 next to 50 rad/s)
+ROUND_OFF = 1e-12
+
+
+def fmt_scaled(x, scale: float, digits: int = 4) -> str:
+    """:func:`fmt`, but "0" for a value that is round-off of zero.
+
+    Parameters
+    ----------
+    x : float or None
+        The value.
+    scale : float
+        The magnitude of the quantity it was computed with (e.g. the norm of its vector) in the same unit;
+        ``|x| < ROUND_OFF·scale`` prints as "0".
+    digits : int
+        Significant digits otherwise.
+
+    Returns
+    -------
+    str
+        The formatted number ('–' for None or non-finite values).
+    """
+    if x is not None and math.isfinite(float(x)) and abs(float(x)) < ROUND_OFF * abs(float(scale)):
+        return "0"
+    return fmt(x, digits)
+
+
+def fmt_percent(fraction, digits: int = 2) -> str:
+    """A fraction as a percentage with ``digits`` significant digits ("0.42 %", "3.1 %", "97 %"); '–' for None.
+
+    Parameters
+    ----------
+    fraction : float or None
+        The fraction (1 = 100 %).
+    digits : int
+        Significant digits.
+
+    Returns
+    -------
+    str
+        Never rounds a fraction below 1 up to "100 %" (0.9996 → "99.96 %").
+    """
+    if fraction is None or not math.isfinite(float(fraction)):
+        return "–"
+    v = 100.0 * float(fraction)
+    text = f"{v:.{digits}g}"
+    while float(text) == 100.0 and v < 100.0 and digits < 8:   # 99.96 % is not 100 %
+        digits += 1
+        text = f"{v:.{digits}g}"
+    if "e" in text:
+        text = f"{v:.{digits + 2}f}".rstrip("0").rstrip(".")
+    return f"{text} %"
 
 
 def table(headers: Sequence[str], rows: Iterable[Sequence], cls: str = "") -> str:
