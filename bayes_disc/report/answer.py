@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .sections import Raw, Section, esc, fmt, fmt_scaled, table
+from .sections import Raw, Section, esc, fmt, fmt_count, fmt_scaled, table
 
 LIT_LABELS = {"potts_crowther": "Potts & Crowther 2000", "hummel2002": "Hummel & Hubbard 2002 (Table 2)"}
 #: the posterior interval of the first screen
@@ -61,7 +61,7 @@ def convergence_verdict(convergence: dict, settings: dict | None = None) -> Verd
     ok = bool(convergence.get("converged"))
     rh, ess = convergence.get("r_hat_max"), convergence.get("ess_bulk_min_coefficient")
     rh_txt = f"R-hat max {fmt(rh, 4)}" + (f" (threshold {fmt(s['rhat'])})" if "rhat" in s else "")
-    ess_txt = f"smallest coefficient ESS {fmt(ess, 3)}" + (f" (needed {fmt(s['ess'])})" if "ess" in s else "")
+    ess_txt = f"smallest coefficient ESS {fmt_count(ess)}" + (f" (needed {fmt_count(s['ess'])})" if "ess" in s else "")
     total = convergence.get("total_steps")
     cap = s.get("max_steps")
     if ok:
@@ -99,7 +99,8 @@ def identifiability_verdict(data: dict | None, coefficients, config_path) -> Ver
     """
     verdicts = coefficient_verdicts(data)
     if not verdicts:
-        return Verdict("Identifiability", "not run", "not computed for this run:",
+        return Verdict("Identifiability", "not run", "not run; for a verdict per coefficient and the throw that "
+                       "would pin down the weak ones:",
                        command=f"bayes-disc identifiability {config_path}")
     groups: dict[str, list[str]] = {}
     for n in coefficients:
@@ -146,7 +147,7 @@ def adequacy_verdict(diagnosis: dict | None, config_path, coverage: float | None
     if not diagnosis:
         cov = (f" (posterior predictive check: {100 * coverage:.0f} % of measured coordinates inside their 90 % "
                "interval)") if coverage is not None else ""
-        return Verdict("Model adequacy", "not run", f"missing-physics search not run{cov}; run:",
+        return Verdict("Model adequacy", "not run", f"missing-physics search not run{cov}; to run it:",
                        command=f"bayes-disc diagnose {config_path}", link="flights")
     verdict = diagnosis.get("verdict")
     if verdict == "adequate":

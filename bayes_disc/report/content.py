@@ -8,7 +8,7 @@ import numpy as np
 from ..inference.versions import software_versions
 from . import figures as F
 from .answer import LIT_LABELS, compare
-from .sections import Raw, Section, esc, fmt, fmt_percent, fmt_scaled, table
+from .sections import Raw, Section, esc, fmt, fmt_count, fmt_percent, ordinal, table
 
 #: at most this many steps per trace line and draws per chain in the rank plots (evenly thinned)
 MAX_TRACE_STEPS = 1000
@@ -140,7 +140,7 @@ def coefficient_table(ctx) -> Section:
         row += [compare(lit[k].get(n), q["q05"], q["q95"], scale) for k in lit]
         if truth:
             row.append(compare(truth.get(n), q["q05"], q["q95"], scale))
-        row += [fmt(q["r_hat"]), fmt(q["ess_bulk"], 3), fmt(q.get("ess_tail"), 3)]
+        row += [fmt(q["r_hat"]), fmt_count(q["ess_bulk"]), fmt_count(q.get("ess_tail"))]
         rows.append(row)
     coef_html = table(heads, rows, "num")
     # per-flight σ and initial conditions
@@ -230,7 +230,7 @@ def convergence_section(ctx) -> Section:
     try:
         bands, thin = _trace_bands(ctx, names)
         burn = int(conv["burn_in_steps"])
-        src = "chain files (all steps" + (f", every {thin}th shown" if thin > 1 else "") + ")"
+        src = "chain files (all steps" + (f", every {ordinal(thin)} shown" if thin > 1 else "") + ")"
     except (OSError, KeyError, ValueError):
         bands, thin = [], 1
     if not bands:  # chain files absent: kept steps from posterior.nc
@@ -246,7 +246,7 @@ def convergence_section(ctx) -> Section:
     post = ctx.coefficient_chains
     thin = int(np.ceil(post.shape[1] / MAX_RANK_DRAWS))
     figs.append(_figure(ctx, F.rank_figure(post[:, ::thin], ctx.ensemble_of_chain, names), "ranks",
-                        "Rank plots of the kept samples" + (f" (every {thin}th step)" if thin > 1 else "")
+                        "Rank plots of the kept samples" + (f" (every {ordinal(thin)} step)" if thin > 1 else "")
                         + ": histogram of each ensemble's ranks among all samples; flat at 1 (dotted) when the "
                         "ensembles sample the same distribution."))
     tau = conv.get("tau_steps") or {}
@@ -259,14 +259,16 @@ def convergence_section(ctx) -> Section:
         r = p[n]["r_hat"]
         bad = (r is None or not np.isfinite(r) or r >= settings.get("rhat", 1.01))
         return [n, Raw(f'<span class="{"disagree" if bad else "agree"}">{esc(fmt(r))}</span>'),
-                fmt(p[n]["ess_bulk"], 3), fmt(t, 3), fmt(ratio, 3)]
+                fmt_count(p[n]["ess_bulk"]), fmt(t, 3), fmt(ratio, 3)]
     main_names = names + [n for n in p if n.startswith("sigma_")]
     ic_names = [n for n in p if n not in main_names]
     heads = ["parameter", "R-hat (across ensembles)", "bulk ESS", "τ [steps]", "kept steps / τ"]
     crit = (f"Stopping rule: kept steps ≥ {fmt(settings.get('n_tau'))} τ, R-hat &lt; {fmt(settings.get('rhat'))} "
             f"for every parameter, bulk ESS ≥ {fmt(settings.get('ess'))} for every coefficient; cap "
             f"{settings.get('max_steps', '–')} steps.")
-    html = (f"<p>{'Converged' if conv['converged'] else '<b>Not converged</b>'}: {esc(conv['reason'])}. {crit}</p>"
+    state = "Converged" if conv["converged"] else "<b>Not converged</b>"
+    why = "" if str(conv["reason"]).strip().lower() == "converged" else f": {esc(conv['reason'])}"
+    html = (f"<p>{state}{why}. {crit}</p>"
             + table(heads, [row(n) for n in main_names], "num")
             + f"<details><summary>Initial conditions ({len(ic_names)} parameters)</summary>"
             + table(heads, [row(n) for n in ic_names], "num") + "</details>")

@@ -30,7 +30,7 @@ li.status-ok .badge{color:#2d6e3e}li.status-attention .badge{color:#9a5c00}li.st
 .cmp{font-size:.8em;color:#667;margin-left:.25em}.cmp-out{font-style:italic}
 table.answer{font-size:.92em}
 p.guide{background:#eef3fb;border-left:4px solid #4a78c2;padding:.4em .7em;margin:.4em 0 1em}
-p.note{color:#555;font-size:.9em}p.placeholder{color:#777;font-style:italic}
+p.note{color:#555;font-size:.9em}
 table{border-collapse:collapse;margin:.5em 0 1em;font-size:.88em}
 th,td{border:1px solid #ccd;padding:.2em .5em;vertical-align:top}th{background:#f0f2f7;text-align:left}
 table.num td{text-align:right;font-variant-numeric:tabular-nums}table.num td:first-child{text-align:left}

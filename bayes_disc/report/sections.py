@@ -115,6 +115,25 @@ def fmt_percent(fraction, digits: int = 2) -> str:
     return f"{text} %"
 
 
+def fmt_count(x) -> str:
+    """A count-like statistic (effective sample size, steps) as a whole number ("116751", not "1.17e+05");
+    '–' for None or non-finite values."""
+    if x is None:
+        return "–"
+    try:
+        xf = float(x)
+    except (TypeError, ValueError):
+        return esc(x)
+    return f"{xf:.0f}" if math.isfinite(xf) else "–"
+
+
+def ordinal(n: int) -> str:
+    """1st, 2nd, 3rd, 4th, 11th, 12th, 21st …"""
+    n = int(n)
+    suffix = "th" if 10 <= n % 100 <= 20 else {1: "st", 2: "nd", 3: "rd"}.get(n % 10, "th")
+    return f"{n}{suffix}"
+
+
 def table(headers: Sequence[str], rows: Iterable[Sequence], cls: str = "") -> str:
     """An HTML table. Cells are escaped unless given as ``Raw``; headers are escaped."""
     out = [f'<table class="{esc(cls)}"><thead><tr>' + "".join(f"<th>{esc(h)}</th>" for h in headers)
