@@ -19,6 +19,7 @@ from bayes_disc.report import DEFAULT_SECTION_IDS, ReportInputError, Section, bu
 from bayes_disc.report.context import ReportContext, load_run
 from bayes_disc.report.html import render_document
 from bayes_disc.report.run import build_sections
+from bayes_disc.report.sections import fmt_estimate
 from bayes_disc.report.windtunnel import load_wind_tunnel
 
 from conftest import require_outside_input
@@ -165,7 +166,10 @@ def test_content_of_key_sections(tiny):
     # literature (P&C 2000 and the paper's Table 2), truth column and the posterior median are shown
     assert "Potts &amp; Crowther 2000" in coef and "Hummel &amp; Hubbard 2002 (Table 2)" in coef
     assert "<td>2.96 <span" in coef and "<td>2.37 <span" in coef and "<th>truth</th>" in coef
-    assert f"<td>{summary['parameters']['CLa']['q50']:.4g}</td>" in coef
+    q = summary["parameters"]["CLa"]
+    median, _ = fmt_estimate(q["q50"], q["q05"], q["q95"])
+    assert f"<td>CLa</td><td>2.96 ± 1.5</td><td>{median}</td>" in coef
+    assert abs(float(median) - q["q50"]) <= 0.5 * (q["q95"] - q["q05"]) / 10   # shown to 1/10 of the interval
     assert "σ [mm]" in coef and "ωz [rad/s]" in coef
     # a literature value far outside the interval is marked in neutral words (CD0: P&C 0.08, truth 0.15)
     assert '0.08 <span class="cmp cmp-out"' in coef and "✗" not in text
@@ -231,9 +235,17 @@ def test_first_screen_leads_with_the_answer(tiny):
     n_points = sum(f["points"] for f in summary["flights"].values())
     assert f"<b>{n_points} marker points</b>" in first and "<b>1 flight</b>" in first
     table = first[first.index('<table class="num answer">'):]
+    import re
     for name in summary["coefficients"]:
         q = summary["parameters"][name]
-        assert f"<td>{name}</td><td>{q['q50']:.4g}</td><td>{q['q05']:.4g} … {q['q95']:.4g}</td>" in table, name
+        m = re.search(rf"<td>{name}</td><td>([^<]+)</td><td>([^<]+) … ([^<]+)</td>", table)
+        assert m, name
+        for text_value, true in zip(m.groups(), (q["q50"], q["q05"], q["q95"])):
+            # rounded to the decimals shown (or 4 significant digits): never more than half a last digit off
+            last = (10.0 ** -len(text_value.split(".")[1]) if "." in text_value and "e" not in text_value
+                    else abs(true) * 1e-3)
+            assert abs(float(text_value) - true) <= 0.5 * last + 1e-15, (name, text_value, true)
+        assert q["q05"] < q["q95"]
     assert "Potts &amp; Crowther 2000" in table and "truth" in table
     # run and software tables are no longer on the first screen
     assert "sampler setting" not in first and "Software" not in first
@@ -284,6 +296,9 @@ def test_verdict_lines_from_their_files():
 def test_number_formats():
     from bayes_disc.report.answer import compare
     from bayes_disc.report.sections import fmt_count, fmt_percent, fmt_scaled, ordinal
+    assert fmt_estimate(0.1892, 0.1864, 0.192) == ("0.1892", "0.1864 … 0.1920")
+    assert fmt_estimate(-0.003396, -0.01796, 0.006192) == ("-0.003", "-0.018 … 0.006")
+    assert fmt_estimate(-2.798e-05, -2.858e-05, -2.743e-05) == ("-2.798e-05", "-2.858e-05 … -2.743e-05")
     assert fmt_scaled(-1.0658e-14, 50.0) == "0" and fmt_scaled(1e-3, 50.0) == "0.001"
     assert fmt_scaled(1.776e-15, 0.0) == "1.776e-15"          # no scale: nothing to call round-off
     assert fmt_percent(0.997) == "99.7 %" and fmt_percent(0.9996) == "99.96 %" and fmt_percent(0.0086) == "0.86 %"

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .sections import Raw, Section, esc, fmt, fmt_count, fmt_scaled, table
+from .sections import Raw, Section, esc, fmt, fmt_count, fmt_estimate, fmt_scaled, table
 
 LIT_LABELS = {"potts_crowther": "Potts & Crowther 2000", "hummel2002": "Hummel & Hubbard 2002 (Table 2)"}
 #: the posterior interval of the first screen
@@ -240,7 +240,7 @@ def answer_table(ctx) -> str:
         q = p[n]
         lo, hi = q[INTERVAL[0]], q[INTERVAL[1]]
         scale = max(abs(lo), abs(hi), abs(q["q50"]))
-        row = [n, fmt(q["q50"]), f"{fmt(lo)} … {fmt(hi)}"]
+        row = [n, *fmt_estimate(q["q50"], lo, hi)]
         row += [compare(lit[k].get(n), lo, hi, scale) for k in lit]
         if truth:
             row.append(compare(truth.get(n), lo, hi, scale))

@@ -8,7 +8,7 @@ import numpy as np
 from ..inference.versions import software_versions
 from . import figures as F
 from .answer import LIT_LABELS, compare
-from .sections import Raw, Section, esc, fmt, fmt_count, fmt_percent, ordinal, table
+from .sections import Raw, Section, esc, fmt, fmt_count, fmt_estimate, fmt_percent, ordinal, table
 
 #: at most this many steps per trace line and draws per chain in the rank plots (evenly thinned)
 MAX_TRACE_STEPS = 1000
@@ -41,10 +41,6 @@ def _prior_table(name: str) -> dict:
     except KeyError:
         return {}
     return {k: (cp.mean[k], cp.sd[k]) for k in cp.mean}
-
-
-def _interval(p: dict, lo: str, hi: str) -> str:
-    return f"{fmt(p[lo])} … {fmt(p[hi])}"
 
 
 # ---------------------------------------------------------------------------------------------- sections
@@ -135,8 +131,9 @@ def coefficient_table(ctx) -> Section:
         q = p[n]
         pm = prior.get(n)
         scale = max(abs(q["q05"]), abs(q["q95"]), abs(q["q50"]))
-        row = [n, "–" if pm is None else f"{fmt(pm[0])} ± {fmt(pm[1])}", fmt(q["q50"]), _interval(q, "q05", "q95"),
-               _interval(q, "q025", "q975")]
+        med, i90 = fmt_estimate(q["q50"], q["q05"], q["q95"])
+        row = [n, "–" if pm is None else f"{fmt(pm[0])} ± {fmt(pm[1])}", med, i90,
+               fmt_estimate(q["q50"], q["q025"], q["q975"])[1]]
         row += [compare(lit[k].get(n), q["q05"], q["q95"], scale) for k in lit]
         if truth:
             row.append(compare(truth.get(n), q["q05"], q["q95"], scale))

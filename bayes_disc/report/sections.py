@@ -115,6 +115,32 @@ def fmt_percent(fraction, digits: int = 2) -> str:
     return f"{text} %"
 
 
+def fmt_estimate(median, lo, hi, max_decimals: int = 6) -> tuple[str, str]:
+    """A median and its interval with the same number of decimals, set by the interval's width (two
+    significant digits of the width): ("0.1892", "0.1864 … 0.1920").
+
+    Parameters
+    ----------
+    median, lo, hi : float
+        The posterior median and the interval's ends.
+    max_decimals : int
+        Beyond this many decimals (tiny quantities) the numbers use :func:`fmt` instead.
+
+    Returns
+    -------
+    tuple of str
+        The median and "lo … hi".
+    """
+    vals = [float(v) for v in (median, lo, hi)]
+    width = vals[2] - vals[1]
+    if not all(math.isfinite(v) for v in vals) or width <= 0:
+        return fmt(median), f"{fmt(lo)} … {fmt(hi)}"
+    d = max(0, 1 - math.floor(math.log10(width)))
+    if d > max_decimals:
+        return fmt(median), f"{fmt(lo)} … {fmt(hi)}"
+    return f"{vals[0]:.{d}f}", f"{vals[1]:.{d}f} … {vals[2]:.{d}f}"
+
+
 def fmt_count(x) -> str:
     """A count-like statistic (effective sample size, steps) as a whole number ("116751", not "1.17e+05");
     '–' for None or non-finite values."""
