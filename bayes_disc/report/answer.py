@@ -154,7 +154,7 @@ def adequacy_verdict(diagnosis: dict | None, config_path, coverage: float | None
         return Verdict("Model adequacy", "ok", "adequate: residuals of every flight are white and no candidate "
                        "term earns its place.", link="missing-physics")
     effects = [e for e in diagnosis.get("effects") or [] if isinstance(e, dict)]
-    named = ", ".join(f"{e.get('id')} (ΔBIC {fmt(e.get('evidence'), 3)})" for e in effects)
+    named = ", ".join(f"{e.get('id')} (ΔBIC {_evidence(e.get('evidence'))})" for e in effects)
     unexplained = diagnosis.get("unexplained") or []
     flights = sorted({u.get("flight") for u in unexplained if isinstance(u, dict)})
     parts = []
@@ -167,6 +167,15 @@ def adequacy_verdict(diagnosis: dict | None, config_path, coverage: float | None
     tail = f" The coefficients above are those of the model without it; the refit is in {refit}." if (
         named and refit) else ""
     return Verdict("Model adequacy", "attention", text + "." + tail, link="missing-physics")
+
+
+def _evidence(x) -> str:
+    """ΔBIC as a reader wants it: whole numbers from 100 on ("4540"), one decimal below."""
+    try:
+        xf = float(x)
+    except (TypeError, ValueError):
+        return "–"
+    return fmt_count(xf) if abs(xf) >= 100 else fmt(round(xf, 1), 3)
 
 
 def render_verdict(v: Verdict) -> str:
