@@ -19,6 +19,7 @@ from bayes_disc.report import DEFAULT_SECTION_IDS, ReportInputError, Section, bu
 from bayes_disc.report.context import ReportContext, load_run
 from bayes_disc.report.html import render_document
 from bayes_disc.report.run import build_sections
+from bayes_disc.report.sections import fmt_estimate
 from bayes_disc.report.windtunnel import load_wind_tunnel
 
 from conftest import require_outside_input
@@ -109,12 +110,16 @@ def test_report_written_where_expected_and_fast(tiny):
     assert tiny["seconds"] < 30.0, tiny["seconds"]
 
 
+#: sections of a run without diagnosis.json (the missing-physics section is left out, not a placeholder)
+TINY_SECTIONS = [i for i in DEFAULT_SECTION_IDS if i != "missing-physics"]
+
+
 def test_html_parses_with_every_section_and_guide(tiny):
     doc = _parse(tiny["text"])
     assert not doc.errors, doc.errors[:5]
     assert doc.stack == [], doc.stack
-    assert doc.section_ids == list(DEFAULT_SECTION_IDS)
-    assert doc.guides == len(DEFAULT_SECTION_IDS)
+    assert doc.section_ids == TINY_SECTIONS
+    assert doc.guides == len(TINY_SECTIONS) - 1     # every section but the first screen has a reading guide
     assert len(set(doc.ids)) == len(doc.ids), "duplicate element ids"
 
 
@@ -160,17 +165,149 @@ def test_content_of_key_sections(tiny):
         assert f"<td>{name}</td>" in coef, name
     # literature (P&C 2000 and the paper's Table 2), truth column and the posterior median are shown
     assert "Potts &amp; Crowther 2000" in coef and "Hummel &amp; Hubbard 2002 (Table 2)" in coef
-    assert ">2.96<" in coef and ">2.37" in coef and "<th>truth</th>" in coef
-    assert f"<td>{summary['parameters']['CLa']['q50']:.4g}</td>" in coef
+    assert "<td>2.96 <span" in coef and "<td>2.37 <span" in coef and "<th>truth</th>" in coef
+    q = summary["parameters"]["CLa"]
+    median, _ = fmt_estimate(q["q50"], q["q05"], q["q95"])
+    assert f"<td>CLa</td><td>2.96 ± 1.5</td><td>{median}</td>" in coef
+    assert abs(float(median) - q["q50"]) <= 0.5 * (q["q95"] - q["q05"]) / 10   # shown to 1/10 of the interval
     assert "σ [mm]" in coef and "ωz [rad/s]" in coef
-    # a literature value far outside the interval is marked (CD0: P&C 0.08 against a truth of 0.15)
-    assert "0.08 ✗" in coef
+    # a literature value far outside the interval is marked in neutral words (CD0: P&C 0.08, truth 0.15)
+    assert '0.08 <span class="cmp cmp-out"' in coef and "✗" not in text
     assert "contours at 50 % and 90 % probability" in _section(text, "corner")
     assert "R-hat" in _section(text, "convergence")
-    run = _section(text, "summary")
+    run = _section(text, "appendix")
     assert "flights.csv" in run and "potts_crowther" in run and "emcee" in run and "wall time" in run
+    # the walkers actually used, not the configured 0 ("automatic")
+    conv = summary["convergence"]
+    assert f"<td>walkers</td><td>{conv['walkers_per_ensemble']} per ensemble" in run
+    assert f"{conv['walkers_per_ensemble']} walkers × {conv['ensembles']} ensembles" in run
     assert "RMS" in _section(text, "residuals")
     assert "Potts (2005)" in _section(text, "force-curves")
+
+
+class _Text(HTMLParser):
+    """The text a reader sees: character data outside <script> and <style>."""
+
+    def __init__(self):
+        super().__init__()
+        self.parts, self._skip = [], 0
+
+    def handle_starttag(self, tag, attrs):
+        self._skip += tag in ("script", "style")
+
+    def handle_endtag(self, tag):
+        self._skip -= tag in ("script", "style")
+
+    def handle_data(self, data):
+        if not self._skip:
+            self.parts.append(data)
+
+
+def _reader_text(html: str) -> str:
+    t = _Text()
+    t.feed(html)
+    return " ".join(t.parts)
+
+
+def test_first_screen_leads_with_the_answer(tiny):
+    """The first section holds what was estimated, the three verdict lines and the coefficient table with
+    every coefficient's median and 90 % interval; the run tables come last."""
+    text = tiny["text"]
+    summary = json.loads((tiny["run"] / "summary.json").read_text())
+    doc = _parse(text)
+    assert doc.section_ids[0] == "answer" and doc.section_ids[-1] == "appendix"
+    first = _section(text, "answer")
+    body_start = text.index("<body")
+    # nothing but the header comes before it
+    assert text.index('<section id="answer">') < text.index("<section", text.index('<section id="answer">') + 1)
+    assert text.index('<section id="answer">') == text.index("<section", body_start)
+    lines = [m for m in first.split('<li class="verdict-line')[1:]]
+    topics = [ln.split("<b>")[1].split("</b>")[0] for ln in lines]
+    assert topics == ["Convergence:", "Identifiability:", "Model adequacy:"]
+    # the verdicts come before the table, the table before the end of the section
+    assert first.index("verdict-line") < first.index('<table class="num answer">')
+    assert "converged after" in lines[0] or "NOT converged" in lines[0]
+    assert f"R-hat max {summary['convergence']['r_hat_max']:.4g}" in lines[0]
+    # identifiability and diagnosis not run for this run: the line offers the command instead
+    assert "not run" in lines[1] and f"<code>bayes-disc identifiability {tiny['dir'] / 'config.yaml'}</code>" in lines[1]
+    assert "not run" in lines[2] and "<code>bayes-disc diagnose " in lines[2]
+    assert "% of measured coordinates inside their 90 % interval" in lines[2]
+    n_points = sum(f["points"] for f in summary["flights"].values())
+    assert f"<b>{n_points} marker points</b>" in first and "<b>1 flight</b>" in first
+    table = first[first.index('<table class="num answer">'):]
+    import re
+    for name in summary["coefficients"]:
+        q = summary["parameters"][name]
+        m = re.search(rf"<td>{name}</td><td>([^<]+)</td><td>([^<]+) … ([^<]+)</td>", table)
+        assert m, name
+        for text_value, true in zip(m.groups(), (q["q50"], q["q05"], q["q95"])):
+            # rounded to the decimals shown (or 4 significant digits): never more than half a last digit off
+            last = (10.0 ** -len(text_value.split(".")[1]) if "." in text_value and "e" not in text_value
+                    else abs(true) * 1e-3)
+            assert abs(float(text_value) - true) <= 0.5 * last + 1e-15, (name, text_value, true)
+        assert q["q05"] < q["q95"]
+    assert "Potts &amp; Crowther 2000" in table and "truth" in table
+    # run and software tables are no longer on the first screen
+    assert "sampler setting" not in first and "Software" not in first
+
+
+def test_reader_text_has_no_spec_references_placeholders_or_round_off(tiny):
+    text = tiny["text"]
+    words = _reader_text(text)
+    assert "SPEC" not in words
+    assert "placeholder" not in text and "Not computed" not in words and "not computed" not in words
+    assert '<section id="missing-physics">' not in text      # not run: left out
+    # round-off never reaches the reader (e.g. a true angular velocity of -1.07e-14 rad/s is 0)
+    import re
+    assert not re.search(r"\de-(1[3-9]|[2-9]\d)\b", words), re.findall(r"\S*\de-(?:1[3-9]|[2-9]\d)\S*", words)[:5]
+    # contraction is shown as posterior sd / prior sd in per cent, never as a bare "1"
+    ident = _section(text, "identifiability")
+    assert "posterior sd / prior sd" in ident and "contraction" not in ident
+    assert re.findall(r"<td>\d[\d.]* %</td>", ident), "no percentages in the identifiability table"
+
+
+def test_verdict_lines_from_their_files():
+    from bayes_disc.report.answer import adequacy_verdict, convergence_verdict, identifiability_verdict
+    conv = {"converged": False, "reason": "cap", "r_hat_max": 1.05, "ess_bulk_min_coefficient": 120.4,
+            "total_steps": 3000, "kept_steps": 1000, "walkers_per_ensemble": 118, "ensembles": 4}
+    v = convergence_verdict(conv, {"rhat": 1.01, "ess": 400, "max_steps": 3000})
+    assert v.status == "attention" and "step cap of 3000 reached" in v.text and "R-hat max 1.05" in v.text
+    assert "ESS 120 (needed 400)" in v.text and "472000 samples" in v.text
+    v = convergence_verdict(conv | {"converged": True, "total_steps": 750}, {})
+    assert v.status == "ok" and v.text.startswith("converged after 750 steps")
+    coefs = ["CL0", "CLa", "CD0"]
+    data = {"coefficients": {"CL0": {"verdict": "identified"}, "CLa": {"verdict": "weak"},
+                             "CD0": {"verdict": "unidentified"}}}
+    v = identifiability_verdict(data, coefs, "c.yaml")
+    assert v.status == "attention" and v.text.startswith("1 of 3 coefficients identified; weak: CLa; unidentified: CD0")
+    v = identifiability_verdict({"CL0": {"verdict": "identified", "reason": "r"}}, ["CL0"], "c.yaml")
+    assert v.status == "ok" and v.text.startswith("1 of 1 coefficients identified")
+    v = identifiability_verdict(None, coefs, "runs/x/config.yaml")
+    assert v.status == "not run" and v.command == "bayes-disc identifiability runs/x/config.yaml"
+    v = adequacy_verdict({"verdict": "adequate"}, "c.yaml")
+    assert v.status == "ok" and v.text.startswith("adequate")
+    v = adequacy_verdict({"verdict": "missing_physics", "effects": [{"id": "side_force", "evidence": 4539.8}],
+                          "settings": {"refit_run": "out/diagnosis_refit"}}, "c.yaml")
+    assert v.status == "attention" and "side_force (ΔBIC 4540)" in v.text and "out/diagnosis_refit" in v.text
+    v = adequacy_verdict(None, "c.yaml", coverage=0.894)
+    assert v.status == "not run" and "89 %" in v.text and v.command == "bayes-disc diagnose c.yaml"
+
+
+def test_number_formats():
+    from bayes_disc.report.answer import compare
+    from bayes_disc.report.sections import fmt_count, fmt_percent, fmt_scaled, ordinal
+    assert fmt_estimate(0.1892, 0.1864, 0.192) == ("0.1892", "0.1864 … 0.1920")
+    assert fmt_estimate(-0.003396, -0.01796, 0.006192) == ("-0.003", "-0.018 … 0.006")
+    assert fmt_estimate(-2.798e-05, -2.858e-05, -2.743e-05) == ("-2.798e-05", "-2.858e-05 … -2.743e-05")
+    assert fmt_scaled(-1.0658e-14, 50.0) == "0" and fmt_scaled(1e-3, 50.0) == "0.001"
+    assert fmt_scaled(1.776e-15, 0.0) == "1.776e-15"          # no scale: nothing to call round-off
+    assert fmt_percent(0.997) == "99.7 %" and fmt_percent(0.9996) == "99.96 %" and fmt_percent(0.0086) == "0.86 %"
+    assert fmt_percent(1.0) == "100 %" and fmt_percent(None) == "–"
+    assert fmt_count(116751.3) == "116751" and fmt_count(float("nan")) == "–"
+    assert [ordinal(i) for i in (1, 2, 3, 4, 11, 12, 22)] == ["1st", "2nd", "3rd", "4th", "11th", "12th", "22nd"]
+    assert compare(0.08, 0.149, 0.151).html.endswith(">out</span>") and "✗" not in compare(0.08, 0.149, 0.151).html
+    assert compare(0.15, 0.149, 0.151).html.endswith(">in</span>")
+    assert compare(None, 0, 1).html == "–"
 
 
 def test_bad_run_folder_is_a_one_line_input_error(tmp_path, tiny, capsys):
@@ -305,3 +442,37 @@ def test_browser_check_detects_a_broken_image(tiny, tmp_path):
     r = _chromium(tmp_path, "--dump-dom", bad.resolve().as_uri())
     assert r.returncode == 0, r.stderr[-2000:]
     assert _body_attrs(r.stdout).get("data-broken-images") == "1"
+
+
+MEASURE_SCRIPT = """<script>
+window.addEventListener('load', function () {
+  function bottom(sel) { var e = document.querySelector(sel); return e ? e.getBoundingClientRect().bottom : -1; }
+  var b = document.body;
+  b.setAttribute('data-viewport', String(window.innerHeight));
+  b.setAttribute('data-table-bottom', String(bottom('section#answer table.answer')));
+  var lines = document.querySelectorAll('section#answer li.verdict-line');
+  b.setAttribute('data-verdicts', String(lines.length));
+  b.setAttribute('data-verdicts-bottom', String(lines.length ? lines[lines.length - 1].getBoundingClientRect().bottom : -1));
+});
+</script>"""
+
+
+def test_first_screen_in_a_browser_shows_table_and_verdicts(tiny, tmp_path):
+    """At 1280 × 900 px the coefficient table and the three verdict lines are on screen without scrolling
+    (positions measured by the browser's layout), and the screenshot is not blank."""
+    text = tiny["text"]
+    probe = tmp_path / "probe.html"
+    probe.write_text(text.replace("</head>", MEASURE_SCRIPT + "</head>", 1), encoding="utf-8")
+    r = _chromium(tmp_path, "--window-size=1280,900", "--dump-dom", probe.resolve().as_uri())
+    assert r.returncode == 0, r.stderr[-2000:]
+    body = _body_attrs(r.stdout)
+    assert body.get("data-verdicts") == "3", body
+    view = float(body["data-viewport"])
+    assert 0 < float(body["data-verdicts-bottom"]) <= view, body
+    assert 0 < float(body["data-table-bottom"]) <= view, body
+    shot = tmp_path / "first.png"
+    r = _chromium(tmp_path, f"--screenshot={shot}", "--window-size=1280,900", "--hide-scrollbars",
+                  tiny["html"].resolve().as_uri())
+    assert r.returncode == 0 and shot.is_file(), r.stderr[-2000:]
+    px = np.asarray(Image.open(shot).convert("L"), float)
+    assert px.std() > 10 and (px < 128).mean() > 0.01, "first screen looks blank"

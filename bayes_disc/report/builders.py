@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from . import content
+from .answer import answer_section
 from .sections import SectionBuilder
 
 
@@ -14,11 +15,11 @@ def default_builders() -> list[SectionBuilder]:
         A new list on every call (callers may extend it); each item maps a
         :class:`~.context.ReportContext` to a :class:`~.sections.Section` or None.
     """
-    return [content.run_summary, content.coefficient_table, content.corner_section, content.convergence_section,
+    return [answer_section, content.coefficient_table, content.corner_section, content.convergence_section,
             content.residual_section, content.flight_section, content.force_curve_section,
-            content.identifiability_section, content.missing_physics_section]
+            content.identifiability_section, content.missing_physics_section, content.appendix_section]
 
 
 #: section ids of :func:`default_builders`, in order
-DEFAULT_SECTION_IDS = ("summary", "coefficients", "corner", "convergence", "residuals", "flights",
-                       "force-curves", "identifiability", "missing-physics")
+DEFAULT_SECTION_IDS = ("answer", "coefficients", "corner", "convergence", "residuals", "flights",
+                       "force-curves", "identifiability", "missing-physics", "appendix")

@@ -7,9 +7,9 @@ import numpy as np
 
 from ..inference.versions import software_versions
 from . import figures as F
-from .sections import Raw, Section, esc, fmt, table
+from .answer import LIT_LABELS, compare
+from .sections import Raw, Section, esc, fmt, fmt_count, fmt_estimate, fmt_percent, ordinal, table
 
-LIT_LABELS = {"potts_crowther": "Potts & Crowther 2000", "hummel2002": "Hummel & Hubbard 2002 (Table 2)"}
 #: at most this many steps per trace line and draws per chain in the rank plots (evenly thinned)
 MAX_TRACE_STEPS = 1000
 MAX_RANK_DRAWS = 250
@@ -43,58 +43,53 @@ def _prior_table(name: str) -> dict:
     return {k: (cp.mean[k], cp.sd[k]) for k in cp.mean}
 
 
-def _interval(p: dict, lo: str, hi: str) -> str:
-    return f"{fmt(p[lo])} … {fmt(p[hi])}"
-
-
-def _mark(value, p: dict) -> Raw:
-    """A literature/truth value, marked when it lies outside the posterior 95 % interval."""
-    if value is None:
-        return Raw("–")
-    outside = not (p["q025"] <= value <= p["q975"])
-    if outside:
-        return Raw(f'<span class="disagree" title="outside the posterior 95 % interval">{esc(fmt(value))} ✗</span>')
-    return Raw(f'<span class="agree">{esc(fmt(value))}</span>')
-
-
 # ---------------------------------------------------------------------------------------------- sections
-def run_summary(ctx) -> Section:
+def _sampler_rows(settings: dict, conv: dict) -> list[tuple]:
+    """The sampler settings as (name, value) rows, with the walkers actually used (a configured 0 means
+    "automatic": the smallest even number ≥ 2·dim)."""
+    rows = []
+    for k, v in sorted(settings.items()):
+        if k == "walkers" and "walkers_per_ensemble" in conv:
+            used = conv["walkers_per_ensemble"]
+            v = f"{used} per ensemble" + (" (automatic: smallest even number ≥ 2 × parameters)" if not v else "")
+        rows.append((k, v))
+    return rows
+
+
+def flights_table(ctx) -> str:
+    """Data, time span and covered conditions (α, speed, spin of the highest-posterior draw) per flight."""
+    rows = []
+    for k, (name, f) in enumerate(ctx.summary["flights"].items()):
+        kk = ctx.kinematics[k]
+        rows.append((name, Path(str(f.get("file", ""))).name, f.get("samples"), f.get("points"),
+                     f"{fmt(f.get('t_start'))} … {fmt(f.get('t_end'))}", _range(kk["alpha_ref"], 1, 180 / np.pi),
+                     _range(kk["speed"], 1), _range(kk["spin"], 0)))
+    return table(["flight", "file", "samples", "marker points", "t [s]", "α [deg]", "speed [m/s]",
+                  "spin ω·b3 [rad/s]"], rows, "num")
+
+
+def appendix_section(ctx) -> Section:
+    """Run, sampler, least-squares start and software: how the result was produced."""
     s = ctx.summary
     conv = s["convergence"]
     info = ctx.run.run_info
-    kin = ctx.kinematics
     files = sorted({str(f.get("file", "")) for f in s["flights"].values()})
+    n_kept = conv["kept_steps"] * conv["walkers_per_ensemble"] * conv["ensembles"]
     general = table(["item", "value"], [
         ("run", s["name"]), ("run folder", str(ctx.run.run_dir)), ("configuration", str(ctx.run.config_path)),
         ("data files", ", ".join(files)),
         ("flights", len(s["flights"])),
         ("posterior samples kept", f"{conv['kept_steps']} steps × {conv['walkers_per_ensemble']} walkers × "
-                                   f"{conv['ensembles']} ensembles = "
-                                   f"{conv['kept_steps'] * conv['walkers_per_ensemble'] * conv['ensembles']}"),
+                                   f"{conv['ensembles']} ensembles = {n_kept}"),
+        ("burn-in", f"{conv['burn_in_steps']} of {conv['total_steps']} steps"),
         ("prior", f"{s['prior']['name']}: {s['prior']['description']}"),
         ("physics terms beyond the ten-coefficient model", ", ".join(s.get("physics_terms") or []) or "none"),
         ("truth file", "yes (synthetic data; truths overlaid)" if ctx.truth_coefficients else "no"),
         ("wall time of the run", f"{info['wall_time_s']:.0f} s" if "wall_time_s" in info else "–"),
         ("of which sampling", f"{info['sampling_wall_time_s']:.0f} s" if "sampling_wall_time_s" in info else "–"),
     ], "kv")
-    rows = []
-    for k, (name, f) in enumerate(s["flights"].items()):
-        kk = kin[k]
-        rows.append((name, Path(str(f.get("file", ""))).name, f.get("samples"), f.get("points"),
-                     f"{fmt(f.get('t_start'))} … {fmt(f.get('t_end'))}", _range(kk["alpha_ref"], 1, 180 / np.pi),
-                     _range(kk["speed"], 1), _range(kk["spin"], 0)))
-    flights = table(["flight", "file", "samples", "marker points", "t [s]", "α [deg]", "speed [m/s]",
-                     "spin ω·b3 [rad/s]"], rows)
-    verdict_cls = "ok" if conv["converged"] else "warn"
-    state = "converged" if conv["converged"] else "NOT converged"
-    verdict = (f'<p class="verdict {verdict_cls}"><b>Convergence: {state}'
-               f"</b> — {esc(conv['reason'])}. R-hat max {fmt(conv.get('r_hat_max'))}, smallest coefficient bulk "
-               f"ESS {fmt(conv.get('ess_bulk_min_coefficient'), 3)}, τ max {fmt(conv.get('tau_max_steps'), 3)} "
-               f"steps, kept/τ {fmt(conv.get('n_over_tau'), 3)}, mean acceptance "
-               f"{fmt(conv.get('acceptance_mean'), 2)}; burn-in {conv['burn_in_steps']} of {conv['total_steps']} "
-               "steps.</p>")
     settings = s.get("sampler_settings") or {}
-    sampler = table(["sampler setting", "value"], sorted((k, v) for k, v in settings.items()), "kv")
+    sampler = table(["sampler setting", "value"], _sampler_rows(settings, conv), "kv")
     ls = s.get("least_squares") or {}
     ls_rows = [("cost", fmt(ls.get("cost"))), ("condition number", fmt(ls.get("condition_number"), 3)),
                ("RMS per flight [mm]", ", ".join(f"{k} {v:.2f}" for k, v in (ls.get("rms_mm") or {}).items()))]
@@ -106,14 +101,18 @@ def run_summary(ctx) -> Section:
         software = ("<h3>Software (building this report)</h3><p class=note>The run folder records no versions; "
                     "these are the versions that built the report.</p>"
                     + table(["package", "version"], list(software_versions().items()), "kv"))
-    html = (verdict + "<h3>Run</h3>" + general + "<h3>Flights</h3>"
-            + "<p class=note>α, speed and spin ranges are those of the highest-posterior draw's trajectory.</p>"
-            + flights + '<div class="cols"><div><h3>Sampler</h3>' + sampler
+    html = ("<h3>Run</h3>" + general + '<div class="cols"><div><h3>Sampler</h3>' + sampler
             + "</div><div><h3>Least-squares start</h3>" + table(["item", "value"], ls_rows, "kv")
             + software + "</div></div>")
-    return Section("summary", "Run summary",
-                   "What was fitted and how: data, flights and the conditions they cover, prior, sampler, whether "
-                   "the chains converged, and the software that produced it.", html)
+    return Section("appendix", "Appendix: run and software",
+                   "How the result was produced: files, prior, sampler settings, the least-squares start and "
+                   "the software versions.", html)
+
+
+def _ic_scales(truth_ic: np.ndarray) -> np.ndarray:
+    """(12,) magnitude of each initial-condition component's vector (position, velocity, attitude, rate):
+    the scale against which a truth is round-off of zero."""
+    return np.repeat([np.linalg.norm(truth_ic[i: i + 3]) for i in range(0, 12, 3)], 3)
 
 
 def coefficient_table(ctx) -> Section:
@@ -126,17 +125,19 @@ def coefficient_table(ctx) -> Section:
              + [LIT_LABELS.get(k, k) for k in lit])
     if truth:
         heads.append("truth")
-    heads += ["R-hat", "ESS"]
+    heads += ["R-hat", "bulk ESS", "tail ESS"]
     rows = []
     for n in s["coefficients"]:
         q = p[n]
         pm = prior.get(n)
-        row = [n, "–" if pm is None else f"{fmt(pm[0])} ± {fmt(pm[1])}", fmt(q["q50"]), _interval(q, "q05", "q95"),
-               _interval(q, "q025", "q975")]
-        row += [_mark(lit[k].get(n), q) for k in lit]
+        scale = max(abs(q["q05"]), abs(q["q95"]), abs(q["q50"]))
+        med, i90 = fmt_estimate(q["q50"], q["q05"], q["q95"])
+        row = [n, "–" if pm is None else f"{fmt(pm[0])} ± {fmt(pm[1])}", med, i90,
+               fmt_estimate(q["q50"], q["q025"], q["q975"])[1]]
+        row += [compare(lit[k].get(n), q["q05"], q["q95"], scale) for k in lit]
         if truth:
-            row.append(_mark(truth.get(n), q))
-        row += [fmt(q["r_hat"]), fmt(q["ess_bulk"], 3)]
+            row.append(compare(truth.get(n), q["q05"], q["q95"], scale))
+        row += [fmt(q["r_hat"]), fmt_count(q["ess_bulk"]), fmt_count(q.get("ess_tail"))]
         rows.append(row)
     coef_html = table(heads, rows, "num")
     # per-flight σ and initial conditions
@@ -153,6 +154,7 @@ def coefficient_table(ctx) -> Section:
         sig_row.append(Raw(cell))
     frows.append(sig_row)
     truths = {f: ctx.truth_initial(k) for k, f in enumerate(flights)}
+    scales = {f: (None if t is None else _ic_scales(t)) for f, t in truths.items()}
     for j, ic in enumerate(IC_NAMES):
         row = [IC_LABELS[ic]]
         for f in flights:
@@ -160,21 +162,22 @@ def coefficient_table(ctx) -> Section:
             cell = f"{fmt(q['q50'])} ({fmt(q['q05'])} … {fmt(q['q95'])})"
             t = truths[f]
             if t is not None:
-                bad = not (q["q025"] <= t[j] <= q["q975"])
-                cell += (f"<br><span class=\"truth{' disagree' if bad else ''}\">truth {esc(fmt(t[j]))}"
-                         f"{' ✗' if bad else ''}</span>")
+                cell += (f"<br><span class=truth>truth "
+                         f"{compare(float(t[j]), q['q05'], q['q95'], scales[f][j]).html}</span>")
             row.append(Raw(cell))
         frows.append(row)
     flight_html = table(["parameter"] + flights, frows, "num")
-    html = (coef_html + "<p class=note>✗ marks a published (or true) value outside the posterior 95 % interval. "
-            "Rate coefficients (CMq, CRr, CRp, CNr) are per rad/s, as in Hummel &amp; Hubbard (2002); Potts "
-            "&amp; Crowther give no rate terms.</p><h3>Noise scale and initial conditions per flight</h3>" + flight_html
+    html = (coef_html + "<p class=note><i>in</i> / <i>out</i>: the published (or true) value lies inside / outside "
+            "the posterior 90 % interval (with a truth, about one value in ten is <i>out</i> by chance). Rate "
+            "coefficients (CMq, CRr, CRp, CNr) are per rad/s, as in Hummel &amp; Hubbard (2002); Potts "
+            "&amp; Crowther give no rate terms. The model, its coefficients and the published sets: docs/conventions.md in the repository.</p>"
+            "<h3>Noise scale and initial conditions per flight</h3>" + flight_html
             + "<p class=note>Median (5 % … 95 %). Initial state at the flight's first sample: position, "
               "velocity, attitude as a rotation vector ϑ relative to the data-derived start attitude, and "
-              "body-frame angular velocity.</p>")
-    return Section("coefficients", "Coefficients",
-                   "Posterior median and 90 %/95 % intervals of the ten coefficients beside the published "
-                   "values; a ✗ means the published value is outside the 95 % interval.", html)
+              "body-frame angular velocity. A truth that is zero up to round-off is shown as 0.</p>")
+    return Section("coefficients", "Coefficients in detail",
+                   "Prior, posterior median, 90 % and 95 % intervals, published values, R-hat and effective "
+                   "sample sizes of every coefficient; then each flight's noise scale and initial state.", html)
 
 
 def corner_section(ctx) -> Section:
@@ -189,7 +192,8 @@ def corner_section(ctx) -> Section:
     lv = " and ".join(f"{int(round(100 * v))} %" for v in F.CORNER_LEVELS)
     cap = (f"Joint posterior of the ten coefficients ({x.shape[0]} samples). Contours enclose {lv} of the "
            "posterior mass; dashed lines in the histograms are the 5 %, 50 % and 95 % quantiles"
-           + ("; red lines are the true values." if truths else "."))
+           + ("; red lines are the true values" if truths else "")
+           + "; small coefficients are shown multiplied by the power of ten in their label.")
     rf = _figure(ctx, fig, "corner", cap)
     return Section("corner", "Posterior of the ten coefficients",
                    f"Diagonal: each coefficient's marginal; off-diagonal: pairs, contours at {lv} probability; "
@@ -223,7 +227,7 @@ def convergence_section(ctx) -> Section:
     try:
         bands, thin = _trace_bands(ctx, names)
         burn = int(conv["burn_in_steps"])
-        src = "chain files (all steps" + (f", every {thin}th shown" if thin > 1 else "") + ")"
+        src = "chain files (all steps" + (f", every {ordinal(thin)} shown" if thin > 1 else "") + ")"
     except (OSError, KeyError, ValueError):
         bands, thin = [], 1
     if not bands:  # chain files absent: kept steps from posterior.nc
@@ -234,11 +238,12 @@ def convergence_section(ctx) -> Section:
         burn = 0
         src = "posterior.nc (kept steps only)"
     figs.append(_figure(ctx, F.trace_figure(bands, names, burn, step=thin), "trace",
-                        f"Traces per ensemble from the {src}: line = walker median, band = walkers' 5–95 % range."))
+                        f"Traces per ensemble from the {src}: coloured line = an ensemble's walker median, grey band "
+                        "= the walkers' 5–95 % range (lowest and highest over the ensembles)."))
     post = ctx.coefficient_chains
     thin = int(np.ceil(post.shape[1] / MAX_RANK_DRAWS))
     figs.append(_figure(ctx, F.rank_figure(post[:, ::thin], ctx.ensemble_of_chain, names), "ranks",
-                        "Rank plots of the kept samples" + (f" (every {thin}th step)" if thin > 1 else "")
+                        "Rank plots of the kept samples" + (f" (every {ordinal(thin)} step)" if thin > 1 else "")
                         + ": histogram of each ensemble's ranks among all samples; flat at 1 (dotted) when the "
                         "ensembles sample the same distribution."))
     tau = conv.get("tau_steps") or {}
@@ -251,14 +256,16 @@ def convergence_section(ctx) -> Section:
         r = p[n]["r_hat"]
         bad = (r is None or not np.isfinite(r) or r >= settings.get("rhat", 1.01))
         return [n, Raw(f'<span class="{"disagree" if bad else "agree"}">{esc(fmt(r))}</span>'),
-                fmt(p[n]["ess_bulk"], 3), fmt(t, 3), fmt(ratio, 3)]
+                fmt_count(p[n]["ess_bulk"]), fmt(t, 3), fmt(ratio, 3)]
     main_names = names + [n for n in p if n.startswith("sigma_")]
     ic_names = [n for n in p if n not in main_names]
     heads = ["parameter", "R-hat (across ensembles)", "bulk ESS", "τ [steps]", "kept steps / τ"]
     crit = (f"Stopping rule: kept steps ≥ {fmt(settings.get('n_tau'))} τ, R-hat &lt; {fmt(settings.get('rhat'))} "
             f"for every parameter, bulk ESS ≥ {fmt(settings.get('ess'))} for every coefficient; cap "
             f"{settings.get('max_steps', '–')} steps.")
-    html = (f"<p>{'Converged' if conv['converged'] else '<b>Not converged</b>'}: {esc(conv['reason'])}. {crit}</p>"
+    state = "Converged" if conv["converged"] else "<b>Not converged</b>"
+    why = "" if str(conv["reason"]).strip().lower() == "converged" else f": {esc(conv['reason'])}"
+    html = (f"<p>{state}{why}. {crit}</p>"
             + table(heads, [row(n) for n in main_names], "num")
             + f"<details><summary>Initial conditions ({len(ic_names)} parameters)</summary>"
             + table(heads, [row(n) for n in ic_names], "num") + "</details>")
@@ -272,7 +279,8 @@ def residual_section(ctx) -> Section:
     sims = ctx.flight_sims
     fig = _figure(ctx, F.residual_figure(sims), "residuals",
                   "Measured − predicted marker coordinates for the highest-posterior draw, per flight (columns), "
-                  "axis (rows) and marker (colours); cf. Hummel & Hubbard (2002) Fig. 2.")
+                  "axis (rows) and marker (colours); grey: ±2σ of the flight's posterior noise scale; cf. Hummel "
+                  "& Hubbard (2002) Fig. 2.")
     rows = []
     p = ctx.summary["parameters"]
     for s in sims:
@@ -291,20 +299,22 @@ def flight_section(ctx) -> Section:
     kin = ctx.kinematics
     f_alpha = _figure(ctx, F.alpha_figure(sims, [k["alpha_ref"] for k in kin], [k["alpha_draws"] for k in kin]),
                       "angle_of_attack", "Angle of attack against time per flight: highest-posterior draw and the "
-                      "90 % band of posterior draws (cf. Hummel & Hubbard 2002 Fig. 3).")
+                      "90 % band of posterior draws (cf. Hummel & Hubbard 2002 Fig. 3); lower row: the band "
+                      "minus the draw, magnified (a tight band is thinner than the line above).")
     f_traj = _figure(ctx, F.trajectory_figure(sims), "trajectories",
                      "Measured markers (dots) and the predicted marker paths of the highest-posterior draw "
                      "(lines): top view (y against x) and side view (z against x).")
-    rng = np.random.default_rng(ctx.seed + 2)
-    bands = [F.predictive_bands(s, rng) for s in sims]
+    bands = ctx.predictive
     f_pp = _figure(ctx, F.predictive_figure(sims, bands), "posterior_predictive",
                    f"Posterior predictive check ({len(ctx.band_indices)} posterior draws, each with its own "
                    "noise σ): grey band = 90 % interval of replicated minus predicted coordinates (averaged over "
                    "markers); dots = measured minus predicted.")
     rows = [[s.name, f"{100 * b[2]:.1f} %", len(ctx.band_indices)] for s, b in zip(sims, bands)]
-    html = ("<p class=note>A well-calibrated fit has about 90 % of the measured coordinates inside their "
+    html = ("<p class=note>Data per flight, and the conditions it covers (α, speed and spin of the "
+            "highest-posterior draw's trajectory).</p>" + flights_table(ctx)
+            + "<p class=note>A well-calibrated fit has about 90 % of the measured coordinates inside their "
             "90 % posterior predictive interval.</p>"
-            + table(["flight", "points inside 90 % predictive interval", "posterior draws"], rows, "num"))
+            + table(["flight", "coordinates inside 90 % predictive interval", "posterior draws"], rows, "num"))
     return Section("flights", "Flights: angle of attack, trajectories and posterior predictive check",
                    "Which angles of attack each flight covered (wide ranges pin down the α-slopes), how the "
                    "predicted paths match the measured markers, and whether the data sit inside the predictive band.",
@@ -326,7 +336,8 @@ def force_curve_section(ctx) -> Section:
     fig = _figure(ctx, F.force_curve_figure(coef, (lo, hi), tunnel, lit, ctx.truth_coefficients), "force_curves",
                   f"Implied CL(α) = CL0 + CLa·α, CD(α) = CD0 + CDa·α², CM(α) = CM0 + CMa·α: posterior median and "
                   f"90 % band over the flown range α = {lo:.1f}…{hi:.1f}° (shaded; dotted: extrapolation of the "
-                  "median), published linearisations, and the wind-tunnel measurements (squares).")
+                  "median), published linearisations, and the wind-tunnel measurements (squares); lower row: "
+                  "the 90 % band minus the median, magnified.")
     html = (f"<p class=note>Wind-tunnel data: {esc(tunnel.citation)}</p>")
     return Section("force-curves", "Implied force and moment curves",
                    "The flights constrain the curves only over the flown α range (shaded); compare the band with "
@@ -341,20 +352,26 @@ def identifiability_section(ctx) -> Section:
              "combinations they tie together; which throw would determine the rest.")
     parts, figs = [], []
     prior = _prior_table(ctx.summary["prior"]["name"])
-    # the full records, or the SPEC §6 top-level {name: {verdict, reason}} alone
+    # the full records, or the top-level {name: {verdict, reason}} entries alone
     coefs = data.get("coefficients") or {k: v for k, v in data.items() if isinstance(v, dict) and "verdict" in v}
     post = ctx.summary["parameters"]
     rows = []
     for name in ctx.coefficients:
         v = coefs.get(name, {})
         p = post.get(name, {})
-        contraction = (1 - p["sd"] ** 2 / prior[name][1] ** 2) if name in prior and "sd" in p else None
-        rows.append([name, v.get("verdict", "–"), fmt(contraction, 3), v.get("reason", "–")])
-    if not coefs:
-        parts.append("<p class=placeholder>Verdicts not computed for this run: run <code>bayes-disc "
-                     f"identifiability {esc(ctx.run.config_path)}</code> (add <code>--profiles</code> for profile "
-                     "likelihoods) and rebuild the report.</p>")
-    parts.append(table(["coefficient", "verdict", "posterior contraction 1 − σ²post/σ²prior", "reason"], rows))
+        ratio = (p["sd"] / prior[name][1]) if name in prior and "sd" in p else None
+        rows.append([name] + ([v.get("verdict", "–")] if coefs else []) + [fmt_percent(ratio)]
+                    + ([v.get("reason", "–")] if coefs else []))
+    heads = ["coefficient", "posterior sd / prior sd"]
+    if coefs:
+        heads = ["coefficient", "verdict", "posterior sd / prior sd", "reason"]
+    else:
+        guide = ("How far the data narrowed each coefficient beyond its prior, and which coefficients they tie "
+                 "together. Verdicts, the flight envelope and the next throw come from `bayes-disc "
+                 "identifiability` (not run for this run).")
+    parts.append("<p class=note>Posterior sd / prior sd: the share of the prior's width the data left; 100 % "
+                 "means the data taught nothing, 1 % that they narrowed the coefficient a hundredfold.</p>")
+    parts.append(table(heads, rows, "num"))
     env = data.get("envelope")
     if env:
         parts.append("<h3>Flight envelope</h3>" + table(
@@ -435,14 +452,12 @@ def _diagnosis_figure(ctx, data: dict):
                    "accepted term moves the markers; band: ±2 noise standard errors.")
 
 
-def missing_physics_section(ctx) -> Section:
+def missing_physics_section(ctx) -> Section | None:
     data = ctx.run.extras.get("diagnosis")
     guide = ("Whether the residuals call for physics the model lacks (side force, wind, ground effect …): every "
              "candidate of the library is fitted and must earn its place by ΔBIC and leave white residuals.")
     if not data:
-        html = ("<p class=placeholder>Not computed for this run: run <code>bayes-disc diagnose "
-                f"{esc(ctx.run.config_path)}</code> and rebuild the report.</p>")
-        return Section("missing-physics", "Missing physics", guide, html)
+        return None     # not run: the first screen's model-adequacy line gives the command
     effects = [e for e in data.get("effects") or [] if isinstance(e, dict)]
     before, after = data.get("rms_before_mm") or {}, data.get("rms_after_mm") or {}
     wb, wa = data.get("whiteness_before") or {}, data.get("whiteness_after") or {}

@@ -312,6 +312,24 @@ class ReportContext:
                         "spin": s.ref_states[:, 12]})
         return out
 
+    @cached_property
+    def predictive(self) -> list[tuple]:
+        """Per flight: (lo, hi, coverage) of the 90 % posterior predictive interval of measured − reference
+        prediction (:func:`.figures.predictive_bands`; lo, hi (n, m, 3) [m], coverage 0…1), seeded."""
+        from .figures import predictive_bands
+        rng = np.random.default_rng(self.seed + 2)
+        return [predictive_bands(s, rng) for s in self.flight_sims]
+
+    @property
+    def predictive_coverage(self) -> float:
+        """Share of all observed coordinates inside their 90 % posterior predictive interval (0…1)."""
+        n_in = n_seen = 0
+        for s, (_, _, cov) in zip(self.flight_sims, self.predictive):
+            seen = int(np.isfinite(s.residuals).sum())
+            n_in += cov * seen
+            n_seen += seen
+        return float(n_in / max(n_seen, 1))
+
     # -- truth ------------------------------------------------------------------------------------------
     @property
     def truth_coefficients(self) -> dict | None:

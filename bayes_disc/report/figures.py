@@ -47,10 +47,49 @@ def _grid(n: int, ncols: int) -> tuple[int, int]:
 
 
 # ---------------------------------------------------------------------------------------------- posterior
+SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def display_exponent(x: np.ndarray, below: float = 1e-2) -> int:
+    """Power of ten k that brings small values to readable ticks: x·10^k has its largest |value| in [1, 10)
+    when that value is below ``below``, else k = 0.
+
+    Parameters
+    ----------
+    x : ndarray
+        Samples of one quantity.
+    below : float
+        Values whose largest magnitude is at least this are shown as they are.
+
+    Returns
+    -------
+    int
+        The exponent k ≥ 0.
+    """
+    m = float(np.nanmax(np.abs(x))) if np.size(x) else 0.0
+    if not np.isfinite(m) or m == 0.0 or m >= below:
+        return 0
+    return int(-np.floor(np.log10(m)))
+
+
+def scaled_label(name: str, k: int) -> str:
+    """``name`` or ``name ×10ᵏ`` (the quantity shown is name·10^k)."""
+    return name if k == 0 else f"{name} ×10{str(k).translate(SUPERSCRIPT)}"
+
+
 def corner_figure(samples: np.ndarray, labels, truths=None, levels=CORNER_LEVELS) -> Figure:
-    """corner.py plot of samples (N, K) with 5/50/95 % quantile lines and 2-D contours at ``levels``."""
+    """corner.py plot of samples (N, K) with 5/50/95 % quantile lines and 2-D contours at ``levels``.
+
+    Small quantities (rate coefficients ~1e-4) are shown multiplied by a power of ten named in their label,
+    so tick labels stay short; titles are the names alone (the values are in the report's tables)."""
     import corner
     k = samples.shape[1]
+    exps = [display_exponent(samples[:, j]) for j in range(k)]
+    factor = 10.0 ** np.asarray(exps, float)
+    samples = samples * factor
+    labels = [scaled_label(n, e) for n, e in zip(labels, exps)]
+    if truths is not None:
+        truths = [None if t is None else float(t) * f for t, f in zip(truths, factor)]
     fig = new_figure(1.45 * k, 1.45 * k)
     # a parameter with no spread (degenerate test runs) still needs a range
     rng = []
@@ -60,37 +99,49 @@ def corner_figure(samples: np.ndarray, labels, truths=None, levels=CORNER_LEVELS
             pad = abs(lo) * 1e-6 + 1e-12
             lo, hi = lo - pad, hi + pad
         rng.append((lo, hi))
-    corner.corner(samples, fig=fig, labels=list(labels), truths=None if truths is None else list(truths),
-                  truth_color="tab:red", levels=levels, quantiles=(0.05, 0.5, 0.95), show_titles=True,
-                  title_fmt=".3g", title_kwargs={"fontsize": 9}, label_kwargs={"fontsize": 10}, bins=30,
-                  range=rng, plot_datapoints=False, plot_density=False, fill_contours=True, color="tab:blue",
-                  max_n_ticks=3)  # filled contours only: fast to draw and a small PDF
+    corner.corner(samples, fig=fig, labels=labels, truths=truths, truth_color="tab:red", levels=levels,
+                  quantiles=(0.05, 0.5, 0.95), show_titles=True, title_fmt=None, title_kwargs={"fontsize": 10},
+                  label_kwargs={"fontsize": 10}, labelpad=0.1, bins=30, range=rng, plot_datapoints=False,
+                  plot_density=False, fill_contours=True, color="tab:blue", max_n_ticks=3)
+    # filled contours only: fast to draw and a small PDF
     for ax in fig.axes:
         ax.tick_params(labelsize=7)
+    # room for rotated tick labels and, beyond them, the axis labels (corner's margins assume its own size)
+    margin = 0.75 / fig.get_figwidth()
+    fig.subplots_adjust(left=margin, bottom=margin, right=0.99, top=1 - 0.3 / fig.get_figheight())
     return fig
 
 
 def trace_figure(bands: list[np.ndarray], names, burn: int, step: int = 1) -> Figure:
-    """Per-ensemble traces: bands[e] (steps, K, 3) = walker 5/50/95 % quantiles every ``step`` steps."""
+    """Per-ensemble traces: bands[e] (steps, K, 3) = walker 5/50/95 % quantiles every ``step`` steps.
+
+    One grey band (from the lowest 5 % to the highest 95 % quantile of the ensembles) and each ensemble's
+    walker median as a coloured line: overlapping coloured bands would blend into one brown block."""
     k = len(names)
     nr, nc = _grid(k, 2)
     fig = new_figure(11, 1.7 * nr + 0.6)
     axes = fig.subplots(nr, nc, sharex=True, squeeze=False).ravel()
+    n_steps = min(b.shape[0] for b in bands)
+    stack = np.stack([b[:n_steps] for b in bands])          # (E, steps, K, 3)
+    steps = np.arange(n_steps) * step
     for j, name in enumerate(names):
         ax = axes[j]
-        for e, b in enumerate(bands):
+        e_k = display_exponent(stack[:, :, j, :])
+        f = 10.0 ** e_k
+        ax.fill_between(steps, np.nanmin(stack[:, :, j, 0], axis=0) * f, np.nanmax(stack[:, :, j, 2], axis=0) * f,
+                        color="0.82", lw=0, label="walkers' 5–95 % range (all ensembles)" if j == 0 else None)
+        for e in range(stack.shape[0]):
             c = ENSEMBLE_COLORS[e % len(ENSEMBLE_COLORS)]
-            steps = np.arange(b.shape[0]) * step
-            ax.fill_between(steps, b[:, j, 0], b[:, j, 2], color=c, alpha=0.18, lw=0)
-            ax.plot(steps, b[:, j, 1], color=c, lw=0.8, label=f"ensemble {e}" if j == 0 else None)
+            ax.plot(steps, stack[e, :, j, 1] * f, color=c, lw=0.9,
+                    label=f"ensemble {e} median" if j == 0 else None)
         ax.axvline(burn, color="k", ls="--", lw=0.8, label="end of burn-in" if j == 0 else None)
-        ax.set_ylabel(name, fontsize=9)
+        ax.set_ylabel(scaled_label(name, e_k), fontsize=9)
         ax.tick_params(labelsize=7)
     for ax in axes[k:]:
         ax.set_visible(False)
     for ax in axes[max(0, k - nc): k]:
         ax.set_xlabel("step", fontsize=9)
-    fig.legend(loc="upper center", ncol=min(len(bands) + 1, 7), fontsize=8, frameon=False)
+    fig.legend(loc="upper center", ncol=min(len(bands) + 2, 7), fontsize=8, frameon=False)
     fig.subplots_adjust(left=0.08, right=0.98, top=1 - 0.45 / fig.get_figheight(), bottom=0.06, hspace=0.12,
                         wspace=0.25)
     return fig
@@ -123,25 +174,35 @@ def rank_figure(post: np.ndarray, ensemble_of_chain: np.ndarray, names, bins: in
         ax.set_title(name, fontsize=9)
         ax.set_xticks([])
         ax.tick_params(labelsize=7)
+        if j % nc == 0:
+            ax.set_ylabel("relative frequency", fontsize=8)
+        if j >= k - nc:
+            ax.set_xlabel("rank: low → high", fontsize=8)
     for ax in axes[k:]:
         ax.set_visible(False)
     fig.legend(loc="upper center", ncol=min(len(ens), 6), fontsize=8, frameon=False)
-    fig.subplots_adjust(left=0.05, right=0.98, top=1 - 0.5 / fig.get_figheight(), bottom=0.04, hspace=0.35)
+    fig.subplots_adjust(left=0.06, right=0.98, top=1 - 0.5 / fig.get_figheight(), bottom=0.08, hspace=0.35)
     return fig
 
 
 # ---------------------------------------------------------------------------------------------- flights
 def residual_figure(sims) -> Figure:
-    """Measured − predicted marker coordinates (mm) against time: rows x, y, z; one column per flight."""
+    """Measured − predicted marker coordinates (mm) against time: rows x, y, z; one column per flight.
+
+    Residuals are dots (independent measurements, not a path); the grey band is ±2σ of the flight's
+    posterior-median noise scale, where white noise should lie."""
     n = len(sims)
     fig = new_figure(max(6.0, 3.2 * n), 6.5)
     axes = fig.subplots(3, n, sharey="row", squeeze=False)
     for c, s in enumerate(sims):
         r = s.residuals * 1e3
+        sig = float(np.nanmedian(s.sigma)) * 1e3 if np.isfinite(s.sigma).any() else s.sigma_ref * 1e3
         for a in range(3):
             ax = axes[a, c]
+            ax.axhspan(-2 * sig, 2 * sig, color="0.88", lw=0, zorder=0,
+                       label="±2σ (posterior noise)" if (a == 0 and c == 0) else None)
             for m, mid in enumerate(s.marker_ids):
-                ax.plot(s.times, r[:, m, a], ".-", ms=2, lw=0.5, color=MARKER_COLORS[m % len(MARKER_COLORS)],
+                ax.plot(s.times, r[:, m, a], ".", ms=2.5, color=MARKER_COLORS[m % len(MARKER_COLORS)],
                         label=f"marker {mid}" if (a == 0 and c == 0) else None)
             ax.axhline(0, color="k", lw=0.5)
             ax.tick_params(labelsize=7)
@@ -150,30 +211,37 @@ def residual_figure(sims) -> Figure:
             if a == 2:
                 ax.set_xlabel("t [s]", fontsize=9)
         axes[0, c].set_title(f"{s.name}: RMS {s.rms * 1e3:.2f} mm", fontsize=10)
-    fig.legend(loc="upper center", ncol=len(sims[0].marker_ids), fontsize=8, frameon=False)
+    fig.legend(loc="upper center", ncol=len(sims[0].marker_ids) + 1, fontsize=8, frameon=False, markerscale=3)
     fig.subplots_adjust(left=0.07, right=0.98, top=0.88, bottom=0.08, hspace=0.15, wspace=0.12)
     return fig
 
 
 def alpha_figure(sims, alpha_ref: list[np.ndarray], alpha_draws: list[np.ndarray]) -> Figure:
-    """Angle of attack (deg) against time per flight: reference draw and 90 % posterior band."""
+    """Angle of attack (deg) against time per flight: reference draw and 90 % posterior band.
+
+    A tight posterior makes the band thinner than the line, so a lower row magnifies it: the band's 5 % and
+    95 % quantiles minus the highest-posterior draw."""
     n = len(sims)
-    fig = new_figure(max(6.0, 3.2 * n), 3.2)
-    axes = fig.subplots(1, n, sharey=True, squeeze=False)[0]
+    fig = new_figure(max(6.0, 3.2 * n), 4.6)
+    axes = fig.subplots(2, n, sharey="row", sharex="col", squeeze=False, gridspec_kw={"height_ratios": [3, 1.4]})
     for c, s in enumerate(sims):
-        ax = axes[c]
+        ax, bx = axes[0, c], axes[1, c]
         a_ref = np.degrees(alpha_ref[c])
         a_d = np.degrees(alpha_draws[c])
         lo, hi = np.nanquantile(a_d, [0.05, 0.95], axis=0)
-        ax.fill_between(s.times, lo, hi, color="tab:blue", alpha=0.25, lw=0, label="90 % posterior band")
+        ax.fill_between(s.times, lo, hi, color="tab:blue", alpha=0.3, lw=0, label="90 % posterior band")
         ax.plot(s.times, a_ref, color="tab:blue", lw=1.2, label="highest-posterior draw")
         ax.set_title(f"{s.name}: α {np.nanmin(a_ref):.1f}…{np.nanmax(a_ref):.1f}°", fontsize=10)
-        ax.set_xlabel("t [s]", fontsize=9)
-        ax.tick_params(labelsize=7)
-        ax.grid(alpha=0.3)
-    axes[0].set_ylabel("angle of attack α [deg]", fontsize=9)
-    axes[0].legend(fontsize=7, loc="best")
-    fig.subplots_adjust(left=0.07, right=0.98, top=0.88, bottom=0.16, wspace=0.08)
+        bx.fill_between(s.times, lo - a_ref, hi - a_ref, color="tab:blue", alpha=0.3, lw=0)
+        bx.axhline(0, color="tab:blue", lw=1.0)
+        bx.set_xlabel("t [s]", fontsize=9)
+        for a in (ax, bx):
+            a.tick_params(labelsize=7)
+            a.grid(alpha=0.3)
+    axes[0, 0].set_ylabel("angle of attack α [deg]", fontsize=9)
+    axes[1, 0].set_ylabel("band − draw [deg]", fontsize=9)
+    axes[0, 0].legend(fontsize=7, loc="best")
+    fig.subplots_adjust(left=0.07, right=0.98, top=0.92, bottom=0.11, wspace=0.08, hspace=0.1)
     return fig
 
 
@@ -238,7 +306,7 @@ def predictive_figure(sims, bands) -> Figure:
                 ax.set_ylabel(f"{AXES[a]}: measured − predicted [mm]", fontsize=8)
             if a == 2:
                 ax.set_xlabel("t [s]", fontsize=9)
-        axes[0, c].set_title(f"{s.name}: {cov * 100:.0f} % of points inside", fontsize=10)
+        axes[0, c].set_title(f"{s.name}: {cov * 100:.0f} % of coordinates inside", fontsize=10)
     fig.legend(loc="upper center", fontsize=8, frameon=False)
     fig.subplots_adjust(left=0.08, right=0.98, top=0.88, bottom=0.08, hspace=0.15, wspace=0.12)
     return fig
@@ -260,11 +328,12 @@ def force_curve_figure(coef: dict, alpha_range_deg, tunnel, literature: dict, tr
         "CD": (lambda c, a: c["CD0"] + c["CDa"] * a**2, tunnel.CD),
         "CM": (lambda c, a: c["CM0"] + c["CMa"] * a, tunnel.CM),
     }
-    fig = new_figure(12, 4.6)
-    axes = fig.subplots(1, 3)
+    fig = new_figure(12, 5.8)
+    grid_axes = fig.subplots(2, 3, sharex="col", gridspec_kw={"height_ratios": [3, 1.2]})
+    axes, band_axes = grid_axes[0], grid_axes[1]
     keep = (tunnel.alpha_deg >= x_lo) & (tunnel.alpha_deg <= x_hi)
     styles = [("--", "tab:green"), (":", "tab:purple"), ("-.", "tab:brown")]
-    for ax, (name, (fn, measured)) in zip(axes, curves.items()):
+    for ax, bx, (name, (fn, measured)) in zip(axes, band_axes, curves.items()):
         ax.plot(tunnel.alpha_deg[keep], measured[keep], "ks", ms=3.5, label="wind tunnel (Potts 2005)")
         cs = {k: np.asarray(v)[:, None] for k, v in coef.items()}
         q05, q50, q95 = np.quantile(fn(cs, grid[None, :]), [0.05, 0.5, 0.95], axis=0)
@@ -285,12 +354,21 @@ def force_curve_figure(coef: dict, alpha_range_deg, tunnel, literature: dict, tr
         ylo, yhi = np.nanmin(measured[keep]), np.nanmax(measured[keep])
         pad = 0.15 * (yhi - ylo)
         ax.set_ylim(min(ylo, np.nanmin(q05)) - pad, max(yhi, np.nanmax(q95)) + pad)
-        ax.set_xlabel("α [deg]", fontsize=9)
         ax.set_ylabel(name, fontsize=10)
-        ax.tick_params(labelsize=7)
-        ax.grid(alpha=0.3)
+        # the band is often thinner than the median line: magnified, relative to the median
+        bx.fill_between(full_deg, e05 - e50, e95 - e50, color="tab:blue", alpha=0.10, lw=0)
+        bx.fill_between(grid_deg, q05 - q50, q95 - q50, color="tab:blue", alpha=0.45, lw=0)
+        bx.axhline(0, color="tab:blue", lw=1.0)
+        bx.axvspan(lo_d, hi_d, color="tab:blue", alpha=0.06)
+        inner = max(float(np.nanmax(np.abs(np.r_[q05 - q50, q95 - q50]))), 1e-12)
+        bx.set_ylim(-3 * inner, 3 * inner)    # the flown range's band fills a third; extrapolation may leave
+        bx.set_xlabel("α [deg]", fontsize=9)
+        bx.set_ylabel(f"{name} band − median", fontsize=8)
+        for a in (ax, bx):
+            a.tick_params(labelsize=7)
+            a.grid(alpha=0.3)
     fig.legend(*axes[0].get_legend_handles_labels(), loc="lower center", ncol=4, fontsize=8, frameon=False)
-    fig.subplots_adjust(left=0.06, right=0.99, top=0.96, bottom=0.27, wspace=0.25)
+    fig.subplots_adjust(left=0.06, right=0.99, top=0.97, bottom=0.2, wspace=0.28, hspace=0.08)
     return fig
 
 

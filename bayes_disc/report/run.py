@@ -56,7 +56,7 @@ def build_report(run_dir, reports_dir=Path("reports"), builders: list[SectionBui
         A ``bayes-disc sample`` output folder (summary.json, posterior.nc, run_info.json).
     reports_dir : str or Path
         Folder of the HTML file; relative paths resolve against the current working directory
-        (SPEC §6: ``reports/<name>.html``).
+        (default: ``reports/<name>.html``).
     builders : list of callable, optional
         Section builders (default :func:`~.builders.default_builders`).
     seed : int
@@ -82,9 +82,8 @@ def build_report(run_dir, reports_dir=Path("reports"), builders: list[SectionBui
     out = Path(reports_dir) / f"{name}.html"
     out.parent.mkdir(parents=True, exist_ok=True)
     elapsed = time.perf_counter() - t0
-    subtitle = (f"bayes-disc posterior for run '{name}': {len(run.summary['flights'])} flight(s), "
-                f"{len(run.summary['coefficients'])} coefficients. Run folder: {Path(run_dir).resolve()}")
-    html = render_document(f"bayes-disc report: {name}", subtitle, sections,
+    subtitle = f"Flying-disc coefficients from tracked flights (bayes-disc). Run folder: {Path(run_dir).resolve()}"
+    html = render_document(f"{name}: bayes-disc report", subtitle, sections,
                            footer=f"Report built in {elapsed:.1f} s; figures in {ctx.figure_dir}.")
     out.write_text(html, encoding="utf-8")
     logger.info(f"wrote {out} ({len(sections)} sections, {len(ctx.figures_written)} figures, {elapsed:.1f} s)")

@@ -1,0 +1,276 @@
+"""The report's first screen: what was estimated, the coefficients, and three one-line verdicts.
+
+The verdicts answer "can I trust this?" in one line each:
+
+* convergence, from ``summary.json`` (R-hat, smallest ESS, converged or step cap reached);
+* identifiability, from ``identifiability.json`` (``bayes-disc identifiability``) when the run folder has it,
+  else the command that computes it;
+* model adequacy, from ``diagnosis.json`` (``bayes-disc diagnose``) when present, else the command, with the
+  posterior predictive coverage the report computes anyway.
+
+The verdict functions are pure (dicts in, :class:`Verdict` out) so they can be tested without a run.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .sections import Raw, Section, esc, fmt, fmt_count, fmt_estimate, fmt_scaled, table
+
+LIT_LABELS = {"potts_crowther": "Potts & Crowther 2000", "hummel2002": "Hummel & Hubbard 2002 (Table 2)"}
+#: the posterior interval of the first screen
+INTERVAL = ("q05", "q95")
+INTERVAL_LABEL = "90 % interval"
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """One line of the first screen.
+
+    topic : "Convergence", "Identifiability" or "Model adequacy"; status : "ok" (nothing to worry about),
+    "attention" (read the section it links to) or "not run" (the check needs a command, given in ``command``);
+    text : the line itself (plain text); link : the section id with the details, or "".
+    """
+
+    topic: str
+    status: str
+    text: str
+    command: str = ""
+    link: str = ""
+
+
+STATUS_WORDS = {"ok": "ok", "attention": "check", "not run": "not run"}
+
+
+def convergence_verdict(convergence: dict, settings: dict | None = None) -> Verdict:
+    """The convergence line from ``summary.json``'s ``convergence`` block.
+
+    Parameters
+    ----------
+    convergence : dict
+        ``converged``, ``reason``, ``r_hat_max``, ``ess_bulk_min_coefficient``, ``total_steps``,
+        ``kept_steps``, ``walkers_per_ensemble``, ``ensembles``.
+    settings : dict, optional
+        ``sampler_settings`` of summary.json (thresholds ``rhat``, ``ess`` and the cap ``max_steps``).
+
+    Returns
+    -------
+    Verdict
+        Status "ok" when the stopping rule was met, else "attention" (cap reached or stopped early).
+    """
+    s = settings or {}
+    ok = bool(convergence.get("converged"))
+    rh, ess = convergence.get("r_hat_max"), convergence.get("ess_bulk_min_coefficient")
+    rh_txt = f"R-hat max {fmt(rh, 4)}" + (f" (threshold {fmt(s['rhat'])})" if "rhat" in s else "")
+    ess_txt = f"smallest coefficient ESS {fmt_count(ess)}" + (f" (needed {fmt_count(s['ess'])})" if "ess" in s else "")
+    total = convergence.get("total_steps")
+    cap = s.get("max_steps")
+    if ok:
+        head = f"converged after {total} steps"
+    elif cap is not None and total is not None and int(total) >= int(cap):
+        head = f"NOT converged: step cap of {cap} reached"
+    else:
+        head = f"NOT converged ({convergence.get('reason', 'stopped early')})"
+    samples = ""
+    if all(k in convergence for k in ("kept_steps", "walkers_per_ensemble", "ensembles")):
+        n = convergence["kept_steps"] * convergence["walkers_per_ensemble"] * convergence["ensembles"]
+        samples = (f"; {n} samples kept ({convergence['ensembles']} ensembles × "
+                   f"{convergence['walkers_per_ensemble']} walkers × {convergence['kept_steps']} steps)")
+    return Verdict("Convergence", "ok" if ok else "attention", f"{head}; {rh_txt}, {ess_txt}{samples}.",
+                   link="convergence")
+
+
+def identifiability_verdict(data: dict | None, coefficients, config_path) -> Verdict:
+    """The identifiability line from ``identifiability.json``, or the command that writes it.
+
+    Parameters
+    ----------
+    data : dict or None
+        Content of ``identifiability.json`` (per coefficient ``verdict``: identified, weak or unidentified),
+        None when the file is absent.
+    coefficients : sequence of str
+        The run's coefficients, in table order.
+    config_path : str or Path
+        The run's configuration (for the command).
+
+    Returns
+    -------
+    Verdict
+        "ok" when every coefficient is identified, "attention" otherwise, "not run" without data.
+    """
+    verdicts = coefficient_verdicts(data)
+    if not verdicts:
+        return Verdict("Identifiability", "not run", "not run; for a verdict per coefficient and the throw that "
+                       "would pin down the weak ones:",
+                       command=f"bayes-disc identifiability {config_path}")
+    groups: dict[str, list[str]] = {}
+    for n in coefficients:
+        if n in verdicts:
+            groups.setdefault(verdicts[n], []).append(n)
+    n_id = len(groups.get("identified", []))
+    parts = [f"{n_id} of {sum(len(v) for v in groups.values())} coefficients identified"]
+    for word in ("weak", "unidentified"):
+        if groups.get(word):
+            parts.append(f"{word}: {', '.join(groups[word])}")
+    bad = any(groups.get(w) for w in ("weak", "unidentified"))
+    text = "; ".join(parts) + (" (reasons and the throw that would pin them down below)." if bad else ".")
+    return Verdict("Identifiability", "attention" if bad else "ok", text, link="identifiability")
+
+
+def coefficient_verdicts(data: dict | None) -> dict:
+    """{coefficient: verdict} of ``identifiability.json`` (full records, or the top-level
+    ``{name: {verdict, reason}}`` entries alone); empty without data."""
+    if not data:
+        return {}
+    coefs = data.get("coefficients") or {k: v for k, v in data.items() if isinstance(v, dict) and "verdict" in v}
+    return {k: str(v["verdict"]) for k, v in coefs.items() if isinstance(v, dict) and "verdict" in v}
+
+
+def adequacy_verdict(diagnosis: dict | None, config_path, coverage: float | None = None) -> Verdict:
+    """The model-adequacy line from ``diagnosis.json``, or the command that writes it.
+
+    Parameters
+    ----------
+    diagnosis : dict or None
+        Content of ``diagnosis.json`` (``verdict`` "adequate" or "missing_physics", ``effects``,
+        ``unexplained``), None when absent.
+    config_path : str or Path
+        The run's configuration (for the command).
+    coverage : float, optional
+        Share of measured coordinates inside their 90 % posterior predictive interval (0…1), quoted when
+        the diagnosis has not run.
+
+    Returns
+    -------
+    Verdict
+        "ok" for an adequate model, "attention" for missing physics, "not run" without a diagnosis.
+    """
+    if not diagnosis:
+        cov = (f" (posterior predictive check: {100 * coverage:.0f} % of measured coordinates inside their 90 % "
+               "interval)") if coverage is not None else ""
+        return Verdict("Model adequacy", "not run", f"missing-physics search not run{cov}; to run it:",
+                       command=f"bayes-disc diagnose {config_path}", link="flights")
+    verdict = diagnosis.get("verdict")
+    if verdict == "adequate":
+        return Verdict("Model adequacy", "ok", "adequate: residuals of every flight are white and no candidate "
+                       "term earns its place.", link="missing-physics")
+    effects = [e for e in diagnosis.get("effects") or [] if isinstance(e, dict)]
+    named = ", ".join(f"{e.get('id')} (ΔBIC {_evidence(e.get('evidence'))})" for e in effects)
+    unexplained = diagnosis.get("unexplained") or []
+    flights = sorted({u.get("flight") for u in unexplained if isinstance(u, dict)})
+    parts = []
+    if named:
+        parts.append(f"missing physics found: {named}")
+    if flights:
+        parts.append(f"unexplained structure left in {', '.join(map(str, flights))}")
+    text = "; ".join(parts) or f"verdict {verdict}"
+    refit = (diagnosis.get("settings") or {}).get("refit_run")
+    tail = f" The coefficients above are those of the model without it; the refit is in {refit}." if (
+        named and refit) else ""
+    return Verdict("Model adequacy", "attention", text + "." + tail, link="missing-physics")
+
+
+def _evidence(x) -> str:
+    """ΔBIC as a reader wants it: whole numbers from 100 on ("4540"), one decimal below."""
+    try:
+        xf = float(x)
+    except (TypeError, ValueError):
+        return "–"
+    return fmt_count(xf) if abs(xf) >= 100 else fmt(round(xf, 1), 3)
+
+
+def render_verdict(v: Verdict) -> str:
+    """One verdict as an HTML line (class ``verdict-line`` and ``status-…``)."""
+    cls = v.status.replace(" ", "-")
+    more = f' <a href="#{esc(v.link)}">details</a>' if v.link else ""
+    cmd = f" <code>{esc(v.command)}</code>" if v.command else ""
+    return (f'<li class="verdict-line status-{cls}"><span class="badge">{esc(STATUS_WORDS[v.status])}</span>'
+            f"<b>{esc(v.topic)}:</b> {esc(v.text)}{cmd}{more}</li>")
+
+
+def compare(value, lo: float, hi: float, scale: float = 0.0) -> Raw:
+    """A published or true value and, in neutral words, whether it lies in the interval [lo, hi].
+
+    Parameters
+    ----------
+    value : float or None
+        The value ('–' when None).
+    lo, hi : float
+        The posterior interval.
+    scale : float
+        Magnitude for :func:`~.sections.fmt_scaled` (round-off of zero prints as 0).
+
+    Returns
+    -------
+    Raw
+        ``value <span class=cmp>in</span>`` or ``… out``.
+    """
+    if value is None:
+        return Raw("–")
+    inside = lo <= value <= hi
+    word, title = ("in", "inside the posterior 90 % interval") if inside else (
+        "out", "outside the posterior 90 % interval")
+    return Raw(f'{esc(fmt_scaled(value, scale))} <span class="cmp cmp-{word}" title="{title}">{word}</span>')
+
+
+def estimated_text(ctx) -> str:
+    """One sentence: what was estimated from what."""
+    s = ctx.summary
+    flights = s["flights"]
+    n_points = sum(int(f.get("points", 0)) for f in flights.values())
+    n_samples = sum(int(f.get("samples", 0)) for f in flights.values())
+    coefs = ctx.coefficients
+    extra = [c for c in coefs if c not in DEFAULT_TEN]
+    what = f"the {len(coefs) - len(extra)} aerodynamic coefficients of the Hummel &amp; Hubbard (2002) model"
+    if extra:
+        what += " plus " + ", ".join(esc(e) for e in extra)
+    n_f = len(flights)
+    return (f"<p class=lead>Estimated: {what}, with each flight's initial state and marker noise, from "
+            f"<b>{n_f} flight{'s' if n_f != 1 else ''}</b> ({esc(', '.join(flights))}): {n_samples} time samples, "
+            f"<b>{n_points} marker points</b>. Prior: {esc(s['prior']['name'])}.</p>")
+
+
+DEFAULT_TEN = ("CL0", "CLa", "CD0", "CDa", "CM0", "CMa", "CMq", "CRr", "CRp", "CNr")
+
+
+def answer_table(ctx) -> str:
+    """The coefficient table of the first screen: median, 90 % interval, literature, truth, verdict."""
+    s = ctx.summary
+    p = s["parameters"]
+    lit = s["literature"]
+    truth = ctx.truth_coefficients
+    verdicts = coefficient_verdicts(ctx.run.extras.get("identifiability"))
+    heads = ["coefficient", "median", INTERVAL_LABEL] + [LIT_LABELS.get(k, k) for k in lit]
+    if truth:
+        heads.append("truth (synthetic data)")
+    if verdicts:
+        heads.append("identifiability")
+    rows = []
+    for n in ctx.coefficients:
+        q = p[n]
+        lo, hi = q[INTERVAL[0]], q[INTERVAL[1]]
+        scale = max(abs(lo), abs(hi), abs(q["q50"]))
+        row = [n, *fmt_estimate(q["q50"], lo, hi)]
+        row += [compare(lit[k].get(n), lo, hi, scale) for k in lit]
+        if truth:
+            row.append(compare(truth.get(n), lo, hi, scale))
+        if verdicts:
+            row.append(verdicts.get(n, "–"))
+        rows.append(row)
+    return table(heads, rows, "num answer")
+
+
+def answer_section(ctx) -> Section:
+    """The first screen: what was estimated, the three verdicts, the coefficient table."""
+    conv = convergence_verdict(ctx.summary["convergence"], ctx.summary.get("sampler_settings"))
+    ident = identifiability_verdict(ctx.run.extras.get("identifiability"), ctx.coefficients, ctx.run.config_path)
+    diag = ctx.run.extras.get("diagnosis")
+    coverage = None if diag else ctx.predictive_coverage
+    adequacy = adequacy_verdict(diag, ctx.run.config_path, coverage)
+    verdicts = '<ul class="verdicts">' + "".join(render_verdict(v) for v in (conv, ident, adequacy)) + "</ul>"
+    lit_note = ("<p class=note><i>in</i> / <i>out</i>: the published (or true) value lies inside / outside the "
+                "posterior 90 % interval. Published values come from other discs and other methods, so "
+                "<i>out</i> is a finding, not an error. Rate coefficients (CMq, CRr, CRp, CNr) are per rad/s; "
+                "Potts &amp; Crowther give none. Details, 95 % intervals, R-hat and ESS per coefficient: "
+                '<a href="#coefficients">Coefficients</a>.</p>')
+    html = estimated_text(ctx) + verdicts + answer_table(ctx) + lit_note
+    return Section("answer", "Result", "", html)   # no reading guide: the first screen explains itself
