@@ -165,3 +165,26 @@ def test_rest_readings_point_gravity_along_the_tilted_sensor_axes():
     np.testing.assert_allclose(g, 0.0)
     np.testing.assert_allclose(a, [0.0, 0.0, -9.8], atol=1e-12)   # specific force points up = −b3
     np.testing.assert_allclose(m, [20.0, 0.0, 40.0], atol=1e-12)
+
+
+@pytest.mark.slow
+def test_mixed_data_tighten_the_rate_coefficients(tmp_path):
+    """benchmarks/bench_mixed.py: three throws seen by markers (120 Hz, 1.5 mm) and a logger (0.005/0.05 rad/s,
+    0.05 m/s²). Laplace sds at the least-squares optimum: markers and logger together are at least as tight
+    as markers alone for every rate coefficient, each fit lies within 4 sd of the truth, and the logger's
+    mount (r_s, τ) and each throw's row period are recovered from the logs alone."""
+    import sys
+    from conftest import REPO
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    from bench_mixed import RATE_COEFFICIENTS, mixed_study, table
+    r = mixed_study(tmp_path, max_nfev=40)
+    print(table(r))
+    for n in RATE_COEFFICIENTS:
+        assert r["ratios"][n] <= 1.0, (n, r["ratios"])
+    for kind, f in r["fits"].items():
+        z = {n: (f["value"][n] - r["truth"][n]) / f["sd"][n] for n in f["value"]}
+        assert all(abs(v) < 4 for v in z.values()), (kind, z)
+    logger = r["fits"]["imu"]["logger"]
+    assert set(logger) == set(r["logger_truth"])                     # r_s, τ and the three row periods
+    for n, v in logger.items():
+        assert abs(v["value"] - r["logger_truth"][n]) < 4 * v["sd"], (n, v)
