@@ -23,7 +23,15 @@ recomputed from the posterior samples (:func:`verdicts_from_covariance` on their
 * Experiment design (:func:`rank_throws`): candidate throws on a grid of speed, launch angle, angle of
   attack and spin; each one's expected coefficient information (its own initial conditions as
   nuisance) is added to the current posterior precision; throws are ranked by the D-optimal gain on the
-  weak block, ln det Σ_weak − ln det Σ_weak,new, and the best is described in words and numbers.
+  weak block, ln det Σ_weak − ln det Σ_weak,new, and the best is described in words and numbers. The
+  candidates are marker flights (positions at 120 Hz); a run without marker data gets no design
+  (:func:`design_skip_reason`).
+
+Inertial recordings (SPEC §4b) enter the same Fisher information: every flight's own parameters (initial
+conditions, and for a logger its row period, biases and filter state) are the nuisance block, the logger's
+shared mount (r_s, τ, tilt) sits beside the coefficients. A logger measures rotation rates and specific
+force, not position: the airspeed and the angle of attack reach the data only through the dynamics (the
+forces and moments they produce), which :func:`data_description` puts into every reason.
 """
 from __future__ import annotations
 
@@ -35,6 +43,7 @@ import numpy as np
 from ..inference.leastsq import whitened_jacobian
 from ..inference.model import Problem
 from ..observation.markers import FlightObservation
+from ..observation.models import MarkerPositions
 from ..observation.synth import LaunchSpec
 from ..physics import LITERATURE
 
@@ -115,10 +124,11 @@ def weak_directions(info: np.ndarray, scale: np.ndarray, cov: np.ndarray, names,
 
 
 # ---------------------------------------------------------------------------------------------- verdicts
-def _size(name: str, value: float) -> float:
-    """The size a coefficient's sd is compared with: its estimate or the largest literature value."""
+def _size(name: str, value: float, floor: float = 0.0) -> float:
+    """The size a coefficient's sd is compared with: the largest of its estimate, the literature values and
+    ``floor`` (for a sensor parameter whose value may be 0, e.g. a tilt: its plausible range, the prior sd)."""
     lit = [abs(s.values[name]) for s in LITERATURE.values() if s.values.get(name) is not None]
-    return max([abs(value)] + lit)
+    return max([abs(value), floor] + lit)
 
 
 def _pair_of(name: str):
@@ -128,22 +138,55 @@ def _pair_of(name: str):
     return None
 
 
+def data_description(problem: Problem) -> dict:
+    """What the flights record, for the verdicts' reasons.
+
+    Parameters
+    ----------
+    problem : Problem
+
+    Returns
+    -------
+    dict
+        ``markers``, ``inertial``, ``inertial_only`` (numbers of flights with marker data, with an inertial
+        logger, with the logger alone) and ``text``: a phrase (empty for marker data alone) saying how the
+        α span was obtained and, without markers, that airspeed and α are seen only through the dynamics.
+    """
+    kinds = [{"imu" if not isinstance(c, MarkerPositions) else "markers" for c in ch} for ch in problem.channels]
+    n_markers = sum("markers" in k for k in kinds)
+    n_imu = sum("imu" in k for k in kinds)
+    n_only = sum(k == {"imu"} for k in kinds)
+    if n_imu == 0:
+        text = ""
+    elif n_markers == 0:
+        text = ("inertial data only: no positions, airspeed and α are seen only through the forces and moments "
+                "they produce; this α span is the fitted model's")
+    else:
+        text = (f"markers on {n_markers} flight(s), an inertial logger on {n_imu}"
+                + (f" ({n_only} without markers: there airspeed and α are seen only through the dynamics)"
+                   if n_only else ""))
+    return {"markers": n_markers, "inertial": n_imu, "inertial_only": n_only, "text": text}
+
+
 def verdict(name: str, index: dict, value: np.ndarray, cov: np.ndarray, prior_sd: np.ndarray, alpha_span,
-            profile_shape: str | None = None, profile_halfwidth: float | None = None) -> dict:
+            profile_shape: str | None = None, profile_halfwidth: float | None = None, data: str = "",
+            size_floor: float = 0.0) -> dict:
     """Verdict and reason for coefficient ``name`` from the posterior mean ``value`` and covariance ``cov``
     (coefficient block, indexed by ``index``), the prior sds and the α span [deg] of the flights. With a
     profile, its shape and half-width (:meth:`.ProfilePath.halfwidth`) count too: the sd used is the larger
-    of the covariance's and the profile's."""
+    of the covariance's and the profile's. ``data``: what the flights record (:func:`data_description`
+    ``text``), added to the reason; ``size_floor``: the smallest size the sd is compared with (:func:`_size`)."""
     i = index[name]
     sd = float(np.sqrt(cov[i, i]))
     if profile_halfwidth is not None and np.isfinite(profile_halfwidth):
         sd = max(sd, float(profile_halfwidth))
     ratio = sd ** 2 / prior_sd[i] ** 2
     lo, hi = alpha_span
-    span = f"α spans {lo:.0f}–{hi:.0f}° over all flights"
-    size = _size(name, value[i])
-    out = {"sd": sd, "prior_sd": float(prior_sd[i]), "variance_ratio": float(ratio),
-           "contraction": float(1 - ratio), "relative_sd": sd / size}
+    span = f"α spans {lo:.0f}–{hi:.0f}° over all flights" + (f" ({data})" if data else "")
+    size = _size(name, value[i], size_floor)
+    rel = sd / size if size > 0 else float("inf")          # a parameter at 0 with no scale of its own
+    out = {"value": float(value[i]), "sd": sd, "prior_sd": float(prior_sd[i]), "variance_ratio": float(ratio),
+           "contraction": float(1 - ratio), "relative_sd": rel}
     if ratio >= PRIOR_DOMINATED:
         return out | {"verdict": "unidentified",
                       "reason": f"the prior sets it: posterior sd {sd:.2g} is {np.sqrt(ratio):.0%} of the prior sd "
@@ -165,20 +208,25 @@ def verdict(name: str, index: dict, value: np.ndarray, cov: np.ndarray, prior_sd
                                     f"{need} flights reaching α ≈ {target:.0f}°"}
     if profile_shape == "one-sided":
         return out | {"verdict": "weak", "reason": f"one-sided profile likelihood: bounded on one side only; {span}"}
-    if sd / size > RELATIVE_SD:
-        return out | {"verdict": "weak", "reason": f"known only to ±{sd:.2g} ({sd / size:.0%} of its size {size:.2g}); "
+    if rel > RELATIVE_SD:
+        return out | {"verdict": "weak", "reason": f"known only to ±{sd:.2g} ({rel:.0%} of its size {size:.2g}); "
                                                    f"{span}"}
     return out | {"verdict": "identified",
                   "reason": f"sd {sd:.2g} ({sd / size:.1%} of its size), {1 - ratio:.1%} of the prior variance "
                             f"removed; {span}"}
 
 
-def verdicts_from_covariance(names, value, cov, prior_sd, alpha_span, profiles=None) -> dict:
-    """Verdicts of every coefficient; ``profiles``: {name: ProfilePath} (optional)."""
+def verdicts_from_covariance(names, value, cov, prior_sd, alpha_span, profiles=None, data: str = "",
+                             size_floors: dict | None = None) -> dict:
+    """Verdicts of every coefficient; ``profiles``: {name: ProfilePath} (optional); ``data``: what the
+    flights record (:func:`data_description` ``text``); ``size_floors``: {name: smallest size} for
+    parameters that may be 0 (:func:`_size`)."""
     index = {n: i for i, n in enumerate(names)}
     prof = profiles or {}
+    floors = size_floors or {}
     return {n: verdict(n, index, value, cov, prior_sd, alpha_span,
-                       prof[n].classify() if n in prof else None, prof[n].halfwidth() if n in prof else None)
+                       prof[n].classify() if n in prof else None, prof[n].halfwidth() if n in prof else None,
+                       data, floors.get(n, 0.0))
             for n in names}
 
 
@@ -192,29 +240,59 @@ def candidate_launches(grid: dict = THROW_GRID, spin_sign: float = 1.0, duration
     return out
 
 
+def design_skip_reason(problem: Problem) -> str | None:
+    """Why the next-throw design cannot run for this problem (None when it can): the candidates are marker
+    flights, so the run needs marker data (their ids and noise)."""
+    if not any(isinstance(c, MarkerPositions) for ch in problem.channels for c in ch):
+        return ("not computed: the candidate throws are simulated as marker flights (positions at 120 Hz) and "
+                "this run has no marker data; a design for inertial throws would need the logger's per-throw "
+                "parameters (row period, biases, filter state), which a candidate throw does not have")
+    return None
+
+
+def marker_noise(problem: Problem, sigma: np.ndarray) -> float:
+    """Median noise scale [m] of the marker noise groups (``sigma``: one value per noise group)."""
+    names = {n for ch in problem.channels for c in ch if isinstance(c, MarkerPositions) for n in c.noise_names}
+    vals = [s for n, s in zip(problem.sigma_names, sigma) if n in names]
+    if not vals:
+        raise ValueError("marker_noise: the problem has no marker data")
+    return float(np.median(vals))
+
+
 def throw_information(problem: Problem, theta: np.ndarray, launch: LaunchSpec, sigma: float,
                       rate_hz: float = 120.0) -> np.ndarray | None:
     """Expected information (coefficient block, its initial conditions marginalised) of one throw simulated
     with the coefficients of θ and observed at ``rate_hz`` with noise ``sigma`` [m]; None if the throw does
-    not fly (simulation failure or the disc below the ground)."""
+    not fly (simulation failure or the disc below the ground).
+
+    The candidate is a marker flight: its information is returned on the problem's whole shared block
+    (``problem.ic_start`` square), zero for the observation models' shared parameters (e.g. an inertial
+    logger's mount) that a marker flight does not see."""
     times = np.arange(int(round(launch.duration * rate_hz)) + 1) / rate_hz
     y0 = launch.initial_state()
-    ids = problem.flights[0].marker_ids
+    marker = [c for ch in problem.channels for c in ch if isinstance(c, MarkerPositions)]
+    if not marker:
+        raise ValueError(design_skip_reason(problem))
+    ids = marker[0].data.marker_ids
+    n_shared = problem.layout.explanation_slice.stop          # coefficients, terms, explanations
 
     def one_flight(positions) -> Problem:
         obs = FlightObservation(name=launch.name, source="design", times=times, marker_ids=ids, positions=positions)
         return Problem(flights=[obs], marker_body=problem.marker_body, disc=problem.disc, env=problem.env,
                        prior_name=problem.prior_name, terms=problem.terms, explanations=problem.explanations,
-                       term_start=problem.term_start, start_states=[y0], settings=problem.settings)
+                       term_start=problem.term_start[: n_shared - problem.n_coef], start_states=[y0],
+                       settings=problem.settings)
 
     sub = one_flight(np.zeros((times.size, len(ids), 3)))
-    x = np.r_[theta[: problem.ic_start], sub.state_to_ic(y0, 0)]
+    x = np.r_[theta[:n_shared], sub.state_to_ic(y0, 0)]
     tr = sub.simulate(x[None], 0, want_states=True)
     if not tr.ok[0] or np.any(tr.states[0, :, 2] < 0.0):
         return None
     sub = one_flight(tr.markers[0])   # observed = predicted: the information does not depend on the values
     J = whitened_jacobian(x, sub, np.array([sigma]))
-    return coefficient_information(sub, J)
+    F = np.zeros((problem.ic_start, problem.ic_start))
+    F[:n_shared, :n_shared] = coefficient_information(sub, J)
+    return F
 
 
 def rank_throws(problem: Problem, theta: np.ndarray, cov_coef: np.ndarray, weak: list[int], sigma: float,

@@ -9,7 +9,14 @@ Writes ``<output>/identifiability.json``:
      "fisher": {"condition_number", "eigenvalues", "weak_directions": [{text, pair, correlation, ...}]},
      "profiles": {name: {value, deviance, shape}} (with --profiles),
      "posterior": {contraction, correlation, verdicts, agreement} (when `sample` has run),
-     "design": {"weak", "recommendation", "best", "ranking": [...]}}
+     "data": {markers, inertial, inertial_only, text},
+     "least_squares": {cost, rms_mm (marker flights), noise: {sigma name: {value, unit}}},
+     "design": {"weak", "recommendation", "best", "ranking": [...]} or {"skipped": reason}}
+
+Runs with inertial logs: the entries besides the ten coefficients include the logger's shared mount
+(``imu_offset_*``, ``imu_lpf_tau``, ``imu_tilt_*``) with verdicts of their own; the reasons say when there
+are no positions (airspeed and α seen only through the dynamics); the next-throw design, which simulates
+marker flights, is skipped with its reason when the run has no marker data.
 """
 from __future__ import annotations
 
@@ -26,7 +33,9 @@ from ..inference.data import build_problem
 from ..inference.leastsq import fit_least_squares, whitened_jacobian
 from ..inference.profile import profile_paths
 from ..inference.run import RESULT
-from .identifiability import (ALPHA_PAIRS, coefficient_information, describe_throw, flight_envelopes, rank_throws,
+from ..observation.models import MarkerPositions
+from .identifiability import (ALPHA_PAIRS, coefficient_information, data_description, describe_throw,
+                              design_skip_reason, flight_envelopes, marker_noise, rank_throws,
                               verdicts_from_covariance, weak_directions)
 
 ALPHA_COEFFICIENTS = tuple(n for pair in ALPHA_PAIRS for n in pair)
@@ -76,8 +85,12 @@ def run_identifiability(cfg: RunConfig, profiles: bool = False, design: bool = T
     names = problem.names[:nc]
     ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
                            seed=cfg.sampler.seed)
-    logger.info(f"{cfg.name}: least squares cost {ls.cost:.1f}, RMS "
-        + ", ".join(f"{n} {s * 1e3:.2f} mm" for n, s in zip(ls.flight_names, ls.sigma)))
+    units = _noise_units(problem)
+    noise = {n: {"value": float(s), "unit": u} for n, s, u in zip(problem.sigma_names, ls.sigma, units)}
+    marker_rms = {n[len("sigma_"):]: v["value"] * 1e3 for n, v in noise.items() if v["unit"] == "m"}
+    logger.info(f"{cfg.name}: least squares cost {ls.cost:.1f}, residual RMS "
+                + ", ".join(f"{n} {v['value']:.3g} {v['unit']}" for n, v in noise.items()))
+    data = data_description(problem)
     # envelope
     env = flight_envelopes(problem, ls.theta)
     all_alpha = np.concatenate([e.alpha_deg for e in env])
@@ -106,34 +119,39 @@ def run_identifiability(cfg: RunConfig, profiles: bool = False, design: bool = T
         paths = {p.name: p for p in found}
         prof = {p.name: {"value": [q.value for q in p.points], "deviance": p.deviance.tolist(),
                          "shape": p.classify(), "halfwidth": p.halfwidth()} for p in found}
-    coefs = verdicts_from_covariance(names, ls.theta[:nc], cov_coef, prior_sd, span, paths)
+    floors = {q.name: q.prior_sd for q in problem.layout.observation_parameters}   # a logger's mount: may be 0
+    coefs = verdicts_from_covariance(names, ls.theta[:nc], cov_coef, prior_sd, span, paths, data["text"], floors)
     result = {n: {"verdict": v["verdict"], "reason": v["reason"]} for n, v in coefs.items()}
-    result.update({"coefficients": coefs, "envelope": envelope, "fisher": fisher,
-                   "least_squares": {"cost": ls.cost, "rms_mm": {n: float(s * 1e3) for n, s in
-                                                                 zip(ls.flight_names, ls.sigma)}}})
+    result.update({"coefficients": coefs, "envelope": envelope, "fisher": fisher, "data": data,
+                   "least_squares": {"cost": ls.cost, "rms_mm": marker_rms, "noise": noise}})
     if prof is not None:
         result["profiles"] = prof
     post = _posterior_block(out, names)
     if post is not None:
         mean, pcov = post
-        pv = verdicts_from_covariance(names, mean, pcov, prior_sd, span)
+        pv = verdicts_from_covariance(names, mean, pcov, prior_sd, span, data=data["text"], size_floors=floors)
         sd = np.sqrt(np.diag(pcov))
         result["posterior"] = {
             "contraction": {n: float(1 - sd[i] ** 2 / prior_sd[i] ** 2) for i, n in enumerate(names)},
             "correlation": {"names": names, "matrix": (pcov / np.outer(sd, sd)).round(4).tolist()},
             "verdicts": {n: {"verdict": v["verdict"], "reason": v["reason"]} for n, v in pv.items()},
             "agreement": {n: pv[n]["verdict"] == coefs[n]["verdict"] for n in names}}
-    if design:
+    skip = design_skip_reason(problem) if design else None
+    if skip is not None:
+        result["design"] = {"skipped": skip}
+        logger.info(f"next-throw design {skip}")
+    elif design:
         weak = [i for i, n in enumerate(names) if coefs[n]["verdict"] != "identified"]
         block = weak or [i for i, n in enumerate(names) if n in ALPHA_COEFFICIENTS]
-        ranking = rank_throws(problem, ls.theta, cov_coef, block, float(np.median(ls.sigma)))
+        sigma_m = marker_noise(problem, ls.sigma)
+        ranking = rank_throws(problem, ls.theta, cov_coef, block, sigma_m)
         wn = [names[i] for i in block]
         if ranking:
             best = ranking[0]
             text = describe_throw(best, wn)
             result["design"] = {
                 "weak": wn, "block": "weak coefficients" if weak else "α coefficients (none is weak)",
-                "noise_m": float(np.median(ls.sigma)), "recommendation": text,
+                "noise_m": sigma_m, "recommendation": text,
                 "best": {**{k: getattr(best["launch"], k) for k in ("speed", "launch_angle_deg", "alpha_deg",
                                                                      "spin", "duration")},
                          "gain": best["gain"], "sd_before": dict(zip(wn, best["sd_before"].tolist())),
@@ -145,6 +163,22 @@ def run_identifiability(cfg: RunConfig, profiles: bool = False, design: bool = T
     logger.info(format_verdicts(result), extra=RESULT)
     logger.info(f"wrote {out / 'identifiability.json'} ({result['wall_time_s']:.0f} s)")
     return result
+
+
+def _noise_units(problem) -> list[str]:
+    """Unit of every noise group of the problem, in the order of ``problem.sigma_names``: m for marker
+    positions; for an inertial logger rad/s (gyro groups) and m/s² (accelerometer groups)."""
+    from ..observation.models.inertial import GROUPS, InertialMeasurements
+    out = []
+    for ch in problem.channels:
+        for c in ch:
+            if isinstance(c, MarkerPositions):
+                out += ["m"] * len(c.noise_names)
+            elif isinstance(c, InertialMeasurements):
+                out += ["rad/s" if g.startswith("gyro") else "m/s²" for g in GROUPS]
+            else:
+                raise ValueError(f"no unit known for the noise of observation model {c.id!r}")
+    return out
 
 
 def format_verdicts(result: dict) -> str:
@@ -168,5 +202,6 @@ def format_verdicts(result: dict) -> str:
     for w in result["fisher"]["weak_directions"][:2]:
         lines.append(f"  weak direction: {w['text']}")
     if "design" in result:
-        lines.append(f"next throw: {result['design']['recommendation']}")
+        d = result["design"]
+        lines.append(f"next throw: {d['recommendation']}" if "recommendation" in d else f"next throw: {d['skipped']}")
     return "\n".join(lines)

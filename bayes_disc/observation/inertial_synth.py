@@ -127,3 +127,142 @@ def synthetic_log(name: str, initial_state: np.ndarray, coefficients: Coefficien
     return InertialLog(name=name, source="synth", fmt="imu-csv" if timed else "flatball-ins", rows=rows,
                        lines=rows + 2, gyro=gyro, acc=acc, mag=mag, pressure=None,
                        times=rows * spec.period if timed else None, repairs=[])
+
+
+#: standard sea-level pressure [Pa] around which the synthetic barometer reads
+PRESSURE_PA = 101325.0
+#: air density [kg/m³] of the synthetic barometer's hydrostatic height–pressure relation
+BARO_AIR_DENSITY = 1.2
+#: period [s] of the synthetic barometer task (the flatball firmware sleeps 0.1 s between readings)
+BARO_TASK_PERIOD = 0.105
+#: sd [Pa] of the synthetic barometer's reading noise (every update differs from the previous one)
+BARO_NOISE_PA = 1.0
+
+
+def rest_readings(quaternion: np.ndarray, spec: LoggerSpec, g: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Noise-free gyro [rad/s], accelerometer [m/s²] (filter settled) and magnetometer [µT] of a logger at
+    rest with body attitude ``quaternion`` (4,) (w, x, y, z; body→world): ω = 0, f_B = Rᵀ g ẑ.
+
+    Parameters
+    ----------
+    quaternion : (4,) array
+        Body→world attitude of the resting disc.
+    spec : LoggerSpec
+        The logger (tilt, biases, world field).
+    g : float
+        Gravitational acceleration [m/s²].
+
+    Returns
+    -------
+    gyro, acc, mag : (3,) arrays
+        Sensor-axis readings [rad/s], [m/s²], [µT].
+    """
+    C = sensor_rotation(np.asarray(spec.tilt, float)[None])[0]
+    R = quat_to_matrix(np.asarray(quaternion, float))
+    gyro = np.asarray(spec.gyro_bias, float).copy()
+    acc = C @ R.T @ np.array([0.0, 0.0, g]) + np.asarray(spec.acc_bias, float)
+    mag = C @ R.T @ np.asarray(spec.field_uT, float)
+    return gyro, acc, mag
+
+
+@dataclass
+class RecordedThrow:
+    """A synthetic logger recording of one throw with still parts before release and after the end.
+
+    Attributes
+    ----------
+    log : InertialLog
+        The whole recording (``rows`` the logger's step counter, ``times`` None: a flatball-ins log).
+    clean : InertialLog
+        The same rows without sensor noise (gyro, acc; the magnetometer is noise-free in both).
+    release_row : int
+        Logger row of the release (first row of free flight, t = 0).
+    end_row : int
+        First row after the free flight (exclusive end; the disc is at rest from there).
+    lpf_state : (3,) array
+        The accelerometer filter state at release [m/s²] (sensor axes, without bias).
+    """
+
+    log: InertialLog
+    clean: InertialLog
+    release_row: int
+    end_row: int
+    lpf_state: np.ndarray
+
+
+def _barometer(heights: np.ndarray, period: float, rng: np.random.Generator, g: float) -> np.ndarray:
+    """Pressure [Pa] per row: hydrostatic for the height [m], read every ⌈T/P⌉ rows (T = BARO_TASK_PERIOD)
+    and held in between, each reading with Gaussian noise (BARO_NOISE_PA)."""
+    every = int(np.ceil(BARO_TASK_PERIOD / period))
+    reads = np.arange(0, heights.size, every)
+    value = PRESSURE_PA - BARO_AIR_DENSITY * g * heights[reads] + rng.normal(0.0, BARO_NOISE_PA, reads.size)
+    return np.repeat(value, every)[: heights.size]
+
+
+def recorded_throw(name: str, initial_state: np.ndarray, coefficients: Coefficients, duration: float,
+                   spec: LoggerSpec, rng: np.random.Generator, rest_before: float = 1.0, rest_after: float = 0.3,
+                   first_row: int = 0, disc: Disc = Disc(), env: Environment = Environment(), terms=(),
+                   extension=None) -> RecordedThrow:
+    """A flatball-ins-like recording: the disc still for ``rest_before`` [s], the throw from release for
+    ``duration`` [s] (:func:`logger_readings`), then still again for ``rest_after`` [s].
+
+    The throwing motion itself (the hand's spin-up) is not simulated: the rows jump from rest to the
+    release state. Before release the disc rests at its release attitude with the filter settled; after
+    the end it rests at its final attitude, the filter relaxing from its last in-flight value towards the
+    resting one as e^(−t/τ) (the landing is not simulated either). Gyro and accelerometer noise as
+    :func:`synthetic_log` on every row; the barometer reads the hydrostatic pressure of the height every
+    ⌈0.105 s / P⌉ rows (1 Pa noise), as the flatball firmware's barometer task does.
+
+    Parameters
+    ----------
+    name : str
+        Flight name of the log.
+    initial_state : (13,) array
+        State at release.
+    coefficients : Coefficients
+        Aerodynamic coefficients.
+    duration : float
+        Free flight [s]; ``int(duration / P) + 1`` rows.
+    spec : LoggerSpec
+        The logger.
+    rng : numpy.random.Generator
+        Noise source.
+    rest_before, rest_after : float
+        Still time before release and after the end [s].
+    first_row : int
+        Step counter of the first row (≥ 0).
+    disc, env, terms, extension
+        As for :func:`bayes_disc.physics.simulate`.
+
+    Returns
+    -------
+    RecordedThrow
+    """
+    if first_row < 0 or rest_before < 0 or rest_after < 0:
+        raise ValueError("recorded_throw: first_row, rest_before and rest_after must not be negative")
+    n_fly = int(duration / spec.period) + 1
+    n_pre = int(round(rest_before / spec.period))
+    n_post = int(round(rest_after / spec.period))
+    gyro_f, acc_f, mag_f, states = logger_readings(initial_state, coefficients, n_fly, spec, disc, env, terms,
+                                                   extension)
+    g0, a0, m0 = rest_readings(states[0, 6:10], spec, env.g)
+    g1, a1, m1 = rest_readings(states[-1, 6:10], spec, env.g)
+    decay = np.exp(-spec.period * np.arange(1, n_post + 1) / spec.lpf_tau)[:, None]
+    acc_post = a1 + (acc_f[-1] - a1) * decay
+    gyro = np.vstack([np.tile(g0, (n_pre, 1)), gyro_f, np.tile(g1, (n_post, 1))])
+    acc = np.vstack([np.tile(a0, (n_pre, 1)), acc_f, acc_post])
+    mag = np.vstack([np.tile(m0, (n_pre, 1)), mag_f, np.tile(m1, (n_post, 1))])
+    heights = np.r_[np.full(n_pre, states[0, 2]), states[:, 2], np.full(n_post, states[-1, 2])]
+    gs = np.array([spec.gyro_noise[1], spec.gyro_noise[1], spec.gyro_noise[0]])
+    as_ = np.array([spec.acc_noise[1], spec.acc_noise[1], spec.acc_noise[0]])
+    noisy_gyro = gyro + rng.normal(0.0, 1.0, gyro.shape) * gs
+    noisy_acc = acc + rng.normal(0.0, 1.0, acc.shape) * as_
+    pressure = _barometer(heights, spec.period, rng, env.g)
+    rows = first_row + np.arange(gyro.shape[0])
+
+    def make(gy, ac):
+        return InertialLog(name=name, source="synth", fmt="flatball-ins", rows=rows.copy(), lines=rows - first_row + 2,
+                           gyro=gy, acc=ac, mag=mag.copy(), pressure=pressure.copy(), times=None, repairs=[])
+    return RecordedThrow(log=make(noisy_gyro, noisy_acc), clean=make(gyro, acc), release_row=int(first_row + n_pre),
+                         end_row=int(first_row + n_pre + n_fly),
+                         lpf_state=acc_f[0] - np.asarray(spec.acc_bias, float))

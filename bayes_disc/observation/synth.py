@@ -9,11 +9,21 @@ per-flight ``gust`` (a wind that blows only during a time window of one flight) 
 that no term of the library describes; ``marker_geometry`` and ``time_offset`` in ``physics:`` make
 recordings whose markers sit elsewhere on the disc or are recorded at shifted times.
 Output: a SPEC §4 marker file and a truth JSON (coefficients, terms, initial states, noise).
+
+An ``imu:`` block adds what an inertial logger fixed in the disc records during the same flights
+(:mod:`.inertial_synth`): sensor position ``offset`` [m], accelerometer filter ``lpf_tau`` [s], ``tilt``
+[rad], row ``period`` [s], gyro/acc noise (axial, transverse) and biases, written as ``flatball-ins``
+logger files (one per flight, named ``<flight>.csv``: no time column, still rows before release and after
+the end, so the throw is found as in real logs) or one ``imu-csv`` file (the free flights only, t from
+release). A flight may override the logger's per-throw values (``period``, biases, filter state at
+release) under its own ``imu:`` or leave the logger out (``imu: false``). The marker times and the
+logger's release are the same instant t = 0, so a run may fit both. The truth JSON records the logger
+and each throw's release row.
 """
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +37,8 @@ from .config_blocks import read_disc_env, read_markers, read_physics  # noqa: F4
 from .config_io import ConfigError, Section, load_yaml
 from .registry import split_extensions
 from .markers import FlightObservation, table_from_flights, write_marker_csv
+from .imu.formats import InertialLog, write_flatball_ins, write_imu_csv
+from .inertial_synth import LoggerSpec, recorded_throw, synthetic_log
 
 DEFAULT_MARKERS = {"0": [0.100, 0.000, -0.015], "1": [-0.0308, 0.0846, -0.015], "2": [-0.0707, -0.0778, -0.015]}
 
@@ -66,6 +78,39 @@ class LaunchSpec:
         return np.concatenate([self.position, v, q, w])
 
 
+#: logger values a flight may override under its own ``imu:`` (per throw in the inertial model)
+PER_THROW_KEYS = ("period", "gyro_bias", "acc_bias", "lpf_state")
+
+
+@dataclass(frozen=True)
+class ImuSynth:
+    """The inertial logger of a synthetic data set and how its logs are written.
+
+    Attributes
+    ----------
+    logger : LoggerSpec
+        The logger (shared mount: offset, filter, tilt, noise; default per-throw values).
+    format : str
+        ``flatball-ins`` (one file per flight, ``<output>/<flight>.csv``) or ``imu-csv`` (one file).
+    output : Path
+        Folder (flatball-ins) or file (imu-csv).
+    rest_before, rest_after : float
+        Still time before release and after the end [s] (flatball-ins).
+    first_row : int
+        Step counter of every log's first row (flatball-ins).
+    flights : dict
+        Flight name -> LoggerSpec of that throw (flights without a logger absent).
+    """
+
+    logger: LoggerSpec
+    format: str
+    output: Path
+    rest_before: float = 1.0
+    rest_after: float = 0.3
+    first_row: int = 0
+    flights: dict = field(default_factory=dict)
+
+
 @dataclass(frozen=True)
 class SynthSpec:
     """A synthetic data set: constants, coefficients, extra physics, markers and flights."""
@@ -79,6 +124,7 @@ class SynthSpec:
     physics: dict = field(default_factory=dict)  # term id -> {parameter: value}
     sample_rate_hz: float = 120.0
     seed: int = 0
+    imu: ImuSynth | None = None
 
     @property
     def terms(self):
@@ -158,8 +204,67 @@ def _recorded_markers(spec: SynthSpec, f: LaunchSpec, y0, times, mb, terms, ext,
 
 @dataclass
 class SynthResult:
+    """Synthetic data: marker flights, the truth, and the inertial logs (when the spec has a logger).
+
+    Attributes
+    ----------
+    flights : list of FlightObservation
+        Marker recordings (t = 0 at release).
+    truth : dict
+        Everything the data were made from (the truth JSON).
+    imu_logs : list of InertialLog
+        One per flight with a logger: the whole recording (flatball-ins, still parts included) or the free
+        flight (imu-csv).
+    imu : ImuSynth or None
+        The logger description (format, output).
+    """
+
     flights: list[FlightObservation]
     truth: dict
+    imu_logs: list[InertialLog] = field(default_factory=list)
+    imu: ImuSynth | None = None
+
+
+def _spec_dict(spec: LoggerSpec) -> dict:
+    return {"offset_m": list(spec.offset), "lpf_tau_s": spec.lpf_tau, "tilt_rad": list(spec.tilt),
+            "period_s": spec.period, "gyro_noise_rad_s": {"axial": spec.gyro_noise[0], "transverse": spec.gyro_noise[1]},
+            "acc_noise_m_s2": {"axial": spec.acc_noise[0], "transverse": spec.acc_noise[1]},
+            "gyro_bias_rad_s": list(spec.gyro_bias), "acc_bias_m_s2": list(spec.acc_bias),
+            "field_uT": list(spec.field_uT)}
+
+
+def _inertial_logs(spec: SynthSpec, rng: np.random.Generator, states0: dict) -> tuple[list, dict]:
+    """The logs of every flight with a logger and their truth entries."""
+    imu, terms, ext = spec.imu, spec.terms, spec.extension()
+    logs, per = [], {}
+    for f in spec.flights:
+        lspec = imu.flights.get(f.name)
+        if lspec is None:
+            continue
+        if f.gust is not None:
+            raise ValueError(f"synthetic flight {f.name!r}: a gust cannot be recorded by the inertial logger "
+                             "(the logger synthesizer simulates one flight without segments)")
+        kw = dict(disc=spec.disc, env=spec.env, terms=terms, extension=ext if ext.size else None)
+        entry = {"period_s": lspec.period, "gyro_bias_rad_s": list(lspec.gyro_bias),
+                 "acc_bias_m_s2": list(lspec.acc_bias)}
+        if imu.format == "flatball-ins":
+            rec = recorded_throw(f.name, states0[f.name], spec.coefficients, f.duration, lspec, rng,
+                                 imu.rest_before, imu.rest_after, imu.first_row, **kw)
+            logs.append(rec.log)
+            entry.update({"file": f"{imu.output.name}/{f.name}.csv", "release_row": rec.release_row,
+                          "end_row": rec.end_row, "rows_in_flight": rec.end_row - rec.release_row,
+                          "lpf_state_m_s2": rec.lpf_state.tolist()})
+        else:
+            log = synthetic_log(f.name, states0[f.name], spec.coefficients, f.duration, lspec, rng, timed=True, **kw)
+            logs.append(log)
+            entry.update({"file": imu.output.name, "release_row": 0, "end_row": int(len(log)),
+                          "rows_in_flight": int(len(log))})
+        per[f.name] = entry
+    truth = {"format": imu.format, "logger": _spec_dict(imu.logger), "rest_before_s": imu.rest_before,
+             "rest_after_s": imu.rest_after, "first_row": imu.first_row, "throws": per,
+             "note": "file relative to the truth file's folder when output is beside it; release_row: logger "
+                     "row of release (t = 0, the first marker sample); end_row: first row after the free flight"}
+    return logs, truth
 
 
 def synthesize(spec: SynthSpec) -> SynthResult:
@@ -168,10 +273,11 @@ def synthesize(spec: SynthSpec) -> SynthResult:
     ids = tuple(spec.markers)
     mb = np.array([spec.markers[i] for i in ids], float)
     terms, ext = spec.terms, spec.extension()
-    flights, truth_flights = [], {}
+    flights, truth_flights, states0 = [], {}, {}
     for f in spec.flights:
         times = np.arange(int(round(f.duration * spec.sample_rate_hz)) + 1) / spec.sample_rate_hz
         y0 = f.initial_state(spec.wind())
+        states0[f.name] = y0
         tr = _simulate_flight(spec, f, y0, times, mb, terms, ext)
         states = tr.states[0]
         recorded = _recorded_markers(spec, f, y0, times, mb, terms, ext, tr.markers[0])
@@ -202,13 +308,37 @@ def synthesize(spec: SynthSpec) -> SynthResult:
         "disc": spec.disc.__dict__, "environment": spec.env.__dict__, "markers": spec.markers,
         "flights": truth_flights,
     }
-    return SynthResult(flights=flights, truth=truth)
+    logs = []
+    if spec.imu is not None:
+        # a separate stream, so that adding a logger leaves the marker noise of the same seed unchanged
+        logs, truth["imu"] = _inertial_logs(spec, np.random.default_rng([spec.seed, 1]), states0)
+    return SynthResult(flights=flights, truth=truth, imu_logs=logs, imu=spec.imu)
 
 
 def write_synth(result: SynthResult, markers_path, truth_path) -> None:
+    """Write the marker file, the truth JSON and (with a logger) the inertial logs.
+
+    Parameters
+    ----------
+    result : SynthResult
+        From :func:`synthesize`.
+    markers_path, truth_path : str or Path
+        Marker CSV (SPEC §4) and truth JSON; the inertial logs go where ``result.imu.output`` says
+        (flatball-ins: ``<output>/<flight>.csv``, one per flight; imu-csv: one file).
+    """
     write_marker_csv(markers_path, table_from_flights(result.flights))
     Path(truth_path).parent.mkdir(parents=True, exist_ok=True)
     Path(truth_path).write_text(json.dumps(result.truth, indent=2))
+    if result.imu is None or not result.imu_logs:
+        return
+    out = Path(result.imu.output)
+    if result.imu.format == "flatball-ins":
+        out.mkdir(parents=True, exist_ok=True)
+        for log in result.imu_logs:
+            write_flatball_ins(out / f"{log.name}.csv", log)
+    else:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        write_imu_csv(out, result.imu_logs)
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -239,6 +369,61 @@ def _gust(path, f: Section) -> tuple | None:
     return (t0, t1, *w)
 
 
+def _pair(path, sec: Section, name: str, default) -> tuple:
+    v = sec.vector(name, 2, list(default))
+    if min(v) < 0:
+        raise ConfigError(path, sec.key(name), f"noise sds must not be negative, got {v}")
+    return tuple(v)
+
+
+def _logger_values(path, sec: Section, base: LoggerSpec, keys) -> LoggerSpec:
+    """LoggerSpec ``base`` with the ``keys`` given in ``sec`` replaced."""
+    vals = {}
+    readers = {
+        "offset": lambda: tuple(sec.vector("offset", 3, list(base.offset))),
+        "lpf_tau": lambda: sec.number("lpf_tau", base.lpf_tau, positive=True),
+        "tilt": lambda: tuple(sec.vector("tilt", 2, list(base.tilt))),
+        "period": lambda: sec.number("period", base.period, positive=True, maximum=1.0),
+        "gyro_noise": lambda: _pair(path, sec, "gyro_noise", base.gyro_noise),
+        "acc_noise": lambda: _pair(path, sec, "acc_noise", base.acc_noise),
+        "gyro_bias": lambda: tuple(sec.vector("gyro_bias", 3, list(base.gyro_bias))),
+        "acc_bias": lambda: tuple(sec.vector("acc_bias", 3, list(base.acc_bias))),
+        "lpf_state": lambda: (None if sec.raw("lpf_state", None) is None
+                              else tuple(sec.vector("lpf_state", 3))),
+        "field_uT": lambda: tuple(sec.vector("field_uT", 3, list(base.field_uT))),
+    }
+    for k in keys:
+        vals[k] = readers[k]()
+    return replace(base, **vals)
+
+
+def _read_imu_block(path, sec: Section, name: str, raw_flights: list) -> ImuSynth | None:
+    """The ``imu:`` block (logger, format, output) and each flight's own ``imu:`` (overrides or false)."""
+    if not sec.has("imu"):
+        return None
+    s = sec.section("imu")
+    logger = _logger_values(path, s, LoggerSpec(), ("offset", "lpf_tau", "tilt", "period", "gyro_noise",
+                                                   "acc_noise", "gyro_bias", "acc_bias", "lpf_state", "field_uT"))
+    fmt = s.string("format", "flatball-ins", choices=("flatball-ins", "imu-csv"))
+    default_out = f"{name}_imu" if fmt == "flatball-ins" else f"{name}_imu.csv"
+    output = path.parent / s.string("output", default_out)
+    rest_before = s.number("rest_before", 1.0, nonnegative=True)
+    rest_after = s.number("rest_after", 0.3, nonnegative=True)
+    first_row = s.number("first_row", 0, integer=True, nonnegative=True)
+    s.finish()
+    flights = {}
+    for i, rf in enumerate(raw_flights):
+        fname = rf.get("name", f"flight{i + 1}") if isinstance(rf, dict) else None
+        own = rf.get("imu", {}) if isinstance(rf, dict) else {}
+        if own is False:
+            continue
+        f = Section(path, own, f"flights[{i}].imu")
+        flights[fname] = _logger_values(path, f, logger, PER_THROW_KEYS)
+        f.finish()
+    return ImuSynth(logger=logger, format=fmt, output=output, rest_before=rest_before, rest_after=rest_after,
+                    first_row=first_row, flights=flights)
+
+
 def load_synth_spec(path) -> tuple[SynthSpec, Path, Path]:
     """Read SYNTH.yaml; returns the spec and the marker/truth output paths (relative to the file)."""
     path = Path(path)
@@ -257,9 +442,14 @@ def load_synth_spec(path) -> tuple[SynthSpec, Path, Path]:
     raw_flights = sec.raw("flights", required=True)
     if not isinstance(raw_flights, list) or not raw_flights:
         raise ConfigError(path, "flights", "must be a non-empty list")
+    imu = _read_imu_block(path, sec, name, raw_flights)
     flights = []
     for i, rf in enumerate(raw_flights):
         f = Section(path, rf, f"flights[{i}]")
+        if imu is not None:
+            f.raw("imu")                                   # read above, with the logger
+        elif f.has("imu"):
+            raise ConfigError(path, f.key("imu"), "a flight's imu needs the top-level imu block (the logger)")
         pitch = f.number("pitch_deg", None, minimum=-90, maximum=90)
         alpha = f.number("alpha_deg", None, minimum=-90, maximum=90)
         if pitch is not None and alpha is not None:
@@ -282,7 +472,12 @@ def load_synth_spec(path) -> tuple[SynthSpec, Path, Path]:
     names = [f.name for f in flights]
     if len(set(names)) != len(names):
         raise ConfigError(path, "flights", f"flight names repeat: {names}")
+    if imu is not None:
+        for i, f in enumerate(flights):
+            if f.gust is not None and f.name in imu.flights:
+                raise ConfigError(path, f"flights[{i}].gust", "a gust cannot be recorded by the inertial logger "
+                                  "(give this flight `imu: false`)")
     sec.finish()
     spec = SynthSpec(name=name, flights=tuple(flights), coefficients=coef, disc=disc, env=env, markers=markers,
-                     physics=physics, sample_rate_hz=rate, seed=seed)
+                     physics=physics, sample_rate_hz=rate, seed=seed, imu=imu)
     return spec, markers_path, truth_path

@@ -300,6 +300,60 @@ def read_flatball_ins(path) -> InertialLog:
     return log
 
 
+#: AHRS and housekeeping columns written by :func:`write_flatball_ins` (estimates of the logger, not measured)
+FLATBALL_WRITTEN_CONSTANTS = {"batt-v": 4.05, "amb-temp-degC": 25.0}
+
+
+def write_flatball_ins(path, log: InertialLog) -> Path:
+    """Write a log as a flatball-ins logger CSV (every logger column, header as the logger writes it).
+
+    Measured columns from the log: ``idx`` = ``rows``, ``acc-*`` in g (÷ :data:`G_STANDARD`), ``gyro-*``
+    in deg/s, ``mag-*`` in µT, ``patm-Pa``; values with 17 significant digits, so that reading the file
+    back gives the log's numbers. ``batt-v`` and ``amb-temp-degC`` are constants
+    (:data:`FLATBALL_WRITTEN_CONSTANTS`); the on-board AHRS columns (``roll`` … ``ahrs_flgs``), which the
+    reader ignores, are written as 0.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file (overwritten).
+    log : InertialLog
+        With ``mag`` (n, 3) [µT] and ``pressure`` (n,) [Pa]; ``rows`` strictly increasing, non-negative.
+
+    Returns
+    -------
+    Path
+        The written file.
+    """
+    if log.mag is None or log.pressure is None:
+        raise ValueError(f"write_flatball_ins: log {log.name!r} needs magnetometer and pressure readings")
+    rows = np.asarray(log.rows)
+    if rows.size == 0 or rows[0] < 0 or np.any(np.diff(rows) <= 0):
+        raise ValueError(f"write_flatball_ins: log {log.name!r}: rows must be non-negative and increasing")
+    measured = {"patm-Pa": log.pressure, "acc-x": log.acc[:, 0] / G_STANDARD, "acc-y": log.acc[:, 1] / G_STANDARD,
+                "acc-z": log.acc[:, 2] / G_STANDARD, "gyro-x": np.degrees(log.gyro[:, 0]),
+                "gyro-y": np.degrees(log.gyro[:, 1]), "gyro-z": np.degrees(log.gyro[:, 2]),
+                "mag-x": log.mag[:, 0], "mag-y": log.mag[:, 1], "mag-z": log.mag[:, 2]}
+    for name, v in measured.items():
+        if not np.all(np.isfinite(v)):
+            raise ValueError(f"write_flatball_ins: log {log.name!r}: column {name!r} holds non-finite values")
+    path = Path(path)
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(FLATBALL_COLUMNS)
+        for k in range(rows.size):
+            out = []
+            for c in FLATBALL_COLUMNS:
+                if c == "idx":
+                    out.append(str(int(rows[k])))
+                elif c in measured:
+                    out.append(repr(float(measured[c][k])))
+                else:
+                    out.append(repr(float(FLATBALL_WRITTEN_CONSTANTS.get(c, 0.0))))
+            w.writerow(out)
+    return path
+
+
 def _row_list(rows: np.ndarray, lines: np.ndarray, limit: int = 12) -> str:
     shown = ", ".join(f"{r} (line {ln})" for r, ln in zip(rows[:limit], lines[:limit]))
     return shown + (f", … {rows.size - limit} more" if rows.size > limit else "")
