@@ -3,9 +3,14 @@
 Writes into the run's output folder:
 
 * ``diagnosis.json`` (SPEC §6): verdict, accepted effects ranked best first ({id, evidence (ΔBIC),
-  estimate, where}), RMS per flight before/after [mm]; plus every candidate's evidence, whiteness
-  before/after, the shifted base coefficients, unexplained structure and the diagnosis in words;
-* ``diagnosis_residuals.npz``: the residual series before and after (report figures);
+  estimate, where}), marker RMS per flight before/after [mm] (``rms_before_mm``, ``rms_after_mm``: the
+  flights with markers); ``rms_before``/``rms_after``: every flight's RMS per recorded quantity
+  ({flight: {markers|gyro|acc: {rms, unit}}}, as ``predict`` reports channels); plus every candidate's
+  evidence, whiteness before/after, the shifted base coefficients, unexplained structure, the candidates
+  skipped (with the reason) and the diagnosis in words;
+* ``diagnosis_residuals.npz``: the residual series before and after (report figures): per flight k and
+  series name ``{k}_before_{name}``, ``{k}_after_{name}``, ``{k}_se_{name}`` (noise standard error),
+  ``{k}_times_{name}`` [s], and ``{k}_times`` (the flight's first observation model's times);
 * ``diagnosis_refit/``: the resampled run with the accepted terms (unless ``sample=False``).
 
 The HTML report (which includes the diagnosis) is built by :mod:`bayes_disc.pipeline`, not here.
@@ -26,10 +31,10 @@ from ..inference.leastsq import fit_least_squares
 from ..inference.run import RESULT, run_sample
 from ..observation.registry import unit
 from ..physics import COEFFICIENT_NAMES
-from .missing_physics import (CANDIDATES, EVIDENCE_THRESHOLD, Diagnosis, ModelFit, describe_where, diagnose,
-                              fingerprint, model_fit)
-from .missing_physics import SERIES_WORDS, onset_of_mismatch
-from .residuals import peak_window, series_of
+from .missing_physics import (CANDIDATES, EVIDENCE_THRESHOLD, Diagnosis, ModelFit, applicable_candidates,
+                              describe_where, diagnose, fingerprint, model_fit)
+from .missing_physics import SERIES_WORDS, onset_of_mismatch, onset_unavailable
+from .residuals import peak_window
 
 logger = logging.getLogger(__name__)
 #: a base coefficient "moved" when the refit shifts it by more than this many base standard deviations
@@ -96,16 +101,48 @@ def _fmt(x: float) -> str:
     return f"{x:.3g}"
 
 
+#: display scale and unit of each RMS channel
+_RMS_DISPLAY = {"m": (1e3, "mm"), "rad/s": (1.0, "rad/s"), "m/s²": (1.0, "m/s²")}
+
+
+def rms_text(rms: dict, after: dict | None = None) -> str:
+    """'flight markers 1.52 mm' or 'flight gyro 0.031 rad/s, acc 0.41 m/s²' (→ after) for every flight.
+
+    Parameters
+    ----------
+    rms, after : dict
+        {flight: {channel: {"rms", "unit"}}} before and (optionally) after.
+
+    Returns
+    -------
+    str
+    """
+    parts = []
+    for f, per in rms.items():
+        items = []
+        for chan, d in per.items():
+            k, u = _RMS_DISPLAY.get(d["unit"], (1.0, d["unit"]))
+            x = f"{d['rms'] * k:.3g}"
+            if after is not None:
+                x += f" → {after[f][chan]['rms'] * k:.3g}"
+            items.append(f"{chan} {x} {u}")
+        parts.append(f"{f} " + ", ".join(items))
+    return "; ".join(parts)
+
+
 def words(result: dict) -> str:
     """The diagnosis in words (printed by the command, shown in the report)."""
     lines = []
-    before, after = result["rms_before_mm"], result["rms_after_mm"]
+    before, after = result["rms_before"], result["rms_after"]
+    skipped = result.get("skipped_candidates") or {}
     if result["verdict"] == "adequate":
         best = result["candidates"][0] if result["candidates"] else None
         lines.append("The model is adequate: the residuals of every flight are white"
                      + (f" and no candidate earns its place (ΔBIC > {EVIDENCE_THRESHOLD:.0f} with white residuals; "
                         f"best: {best['id']}, ΔBIC {best['evidence']:.1f})." if best else "."))
-        lines.append("RMS " + ", ".join(f"{f} {v:.2f} mm" for f, v in before.items()) + ".")
+        lines.append("RMS " + rms_text(before) + ".")
+        if skipped:
+            lines.append("Not tried: " + ", ".join(f"{c} ({why})" for c, why in skipped.items()) + ".")
         return "\n".join(lines)
     for e in result["effects"]:
         est = "; ".join(f"{n} = {_fmt(v['value'])} (95% {_fmt(v['q025'])} … {_fmt(v['q975'])})"
@@ -113,7 +150,7 @@ def words(result: dict) -> str:
         lines.append(f"{e['where'][0].upper()}{e['where'][1:]} → {e['title']} [{e['id']}]. "
                      f"ΔBIC {e['evidence']:.1f}. Estimated {est}.")
     if result["effects"]:
-        lines.append("RMS " + ", ".join(f"{f} {before[f]:.2f} → {after[f]:.2f} mm" for f in before) + ".")
+        lines.append("RMS " + rms_text(before, after) + ".")
         moved = result.get("shifted_coefficients") or []
         if moved:
             lines.append("Base coefficients the missing term had biased: " + ", ".join(
@@ -124,15 +161,22 @@ def words(result: dict) -> str:
     for u in result["unexplained"]:
         a, b = u["peak_window_s"]
         onset = u["model_follows_until_s"]
-        lines.append(f"Unexplained: flight {u['flight']} (RMS {u['rms_mm']:.2f} mm) — structured "
-                     f"{', '.join(SERIES_WORDS[s] for s in u['series'][:4])} residuals, largest at {a:.2f}–{b:.2f} s"
-                     + (f"; the model follows the flight until {onset:.2f} s after its start, then departs"
-                        if onset is not None else "; structured from the start")
-                     + ". No term of the library removes it (a gust, a collision or a tracking fault?).")
+        if onset is not None:
+            when = f"; the model follows the flight until {onset:.2f} s after its start, then departs"
+        elif u.get("onset_note"):
+            when = f"; onset {u['onset_note']}"
+        else:
+            when = "; structured from the start"
+        lines.append(f"Unexplained: flight {u['flight']} (RMS {rms_text({u['flight']: u['rms']})[len(u['flight']) + 1:]})"
+                     f" — structured {', '.join(SERIES_WORDS[s] for s in u['series'][:4])} residuals, largest at "
+                     f"{a:.2f}–{b:.2f} s{when}. No term of the library removes it "
+                     "(a gust, a collision, a sensor or tracking fault, or physics the library lacks?).")
     rejected = [c for c in result["candidates"] if c["status"] == "insufficient" and c["round"] == 1]
     if result["unexplained"] and rejected:
         lines.append("Not forced onto a term: " + ", ".join(
             f"{c['id']} (ΔBIC {c['evidence']:.1f} but leaves structure)" for c in rejected[:4]) + ".")
+    if skipped:
+        lines.append("Not tried: " + ", ".join(f"{c} ({why})" for c, why in skipped.items()) + ".")
     return "\n".join(lines)
 
 
@@ -140,17 +184,36 @@ def _unexplained(diag: Diagnosis) -> list[dict]:
     """Flights whose residuals stay structured after the accepted terms: the series (most structured
     first), the window where the structure is strongest, and the Ljung–Box p-values."""
     out = []
-    names = [f.name for f in diag.final.problem.flights]
+    final = diag.final
+    names = [f.name for f in final.problem.flights]
+    rms, rms_mm = final.rms, final.rms_mm
     for flight, series in diag.unexplained.items():
         if not series:
             continue
         k = names.index(flight)
-        loc = diag.final.localisation[flight]
+        loc = final.localisation[flight]
         series = sorted(series, key=lambda s: loc[s]["ljung_box_p"])
-        out.append({"flight": flight, "series": series, "model_follows_until_s": onset_of_mismatch(diag.final, k),
-                    "peak_window_s": peak_window(diag.final.residuals[k], diag.final.ls.sigma[k]),
-                    "rms_mm": diag.final.rms_mm[flight],
-                    "ljung_box_p": {s: loc[s]["ljung_box_p"] for s in series}})
+        why = onset_unavailable(final.problem, k)
+        u = {"flight": flight, "series": series,
+             "model_follows_until_s": onset_of_mismatch(final, k) if why is None else None,
+             "peak_window_s": peak_window(final.residuals[k], final.ls.sigma),
+             "rms": rms[flight], "ljung_box_p": {s: loc[s]["ljung_box_p"] for s in series}}
+        if flight in rms_mm:
+            u["rms_mm"] = rms_mm[flight]
+        if why is not None:
+            u["onset_note"] = why
+        out.append(u)
+    return out
+
+
+def noise_scales(fit: ModelFit) -> dict:
+    """{sigma name: {"value", "unit"}}: the least-squares noise scale of every noise group of ``fit``."""
+    out = {}
+    names = fit.problem.sigma_names
+    for fr in fit.residuals:
+        for part, off in zip(fr.parts, fr.group_offsets):
+            for g, (_, u) in enumerate(part.group_channels):
+                out[names[off + g]] = {"value": float(fit.ls.sigma[off + g]), "unit": u}
     return out
 
 
@@ -158,11 +221,13 @@ def save_series(path: Path, diag: Diagnosis) -> None:
     """Residual series before/after per flight for the report's figures."""
     arrays = {}
     for k, (b, a) in enumerate(zip(diag.base.residuals, diag.final.residuals)):
-        arrays[f"{k}_times"] = b.times
-        for name, x in series_of(b).items():
+        arrays[f"{k}_times"] = b.parts[0].times
+        after = a.series
+        for name, x in b.series.items():
+            arrays[f"{k}_times_{name}"] = b.part(name).times
             arrays[f"{k}_before_{name}"] = x
-            arrays[f"{k}_after_{name}"] = series_of(a)[name]
-            arrays[f"{k}_se_{name}"] = a.unit_se[name] * diag.final.ls.sigma[k]
+            arrays[f"{k}_after_{name}"] = after[name]
+            arrays[f"{k}_se_{name}"] = a.se(name, diag.final.ls.sigma)
     arrays["flights"] = np.array([f.name for f in diag.base.problem.flights])
     np.savez_compressed(path, **arrays)
 
@@ -204,13 +269,16 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
     ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
                            seed=cfg.sampler.seed)
     base = model_fit(problem, ls, base_ids)
-    logger.info("base RMS " + ", ".join(f"{f} {v:.2f} mm" for f, v in base.rms_mm.items()))
-    candidates = [c for c in CANDIDATES if c not in base_ids]
+    logger.info("base RMS " + rms_text(base.rms))
+    candidates, skipped = applicable_candidates(problem, [c for c in CANDIDATES if c not in base_ids])
+    for c, why in skipped.items():
+        logger.info(f"not trying {c}: {why}")
     logger.info(f"ranking {len(candidates)} candidates by ΔBIC (each a least-squares refit):")
     diag = diagnose(base, build, processes=processes, max_nfev=cfg.least_squares.max_nfev,
                     candidates=candidates, log=logger.info)
     final = diag.final
-    result = {"verdict": diag.verdict, "effects": [], "rms_before_mm": base.rms_mm, "rms_after_mm": final.rms_mm}
+    result = {"verdict": diag.verdict, "effects": [], "rms_before_mm": base.rms_mm, "rms_after_mm": final.rms_mm,
+              "rms_before": base.rms, "rms_after": final.rms, "skipped_candidates": skipped}
     before_est = _ls_estimates(base, COEFFICIENT_NAMES)
     if _sampled_base(out, base_ids):
         before_est = _posterior_estimates(out, COEFFICIENT_NAMES)      # the `sample` run of the same model
@@ -239,13 +307,17 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
     result["candidates"] = [{"id": c.id, "evidence": c.delta_bic, "status": c.status,
                              "evidence_from_white_flights": c.clean_evidence, "per_flight_gain": c.per_flight_gain,
                              "extra_parameters": c.extra_parameters,
-                             "round": r + 1, "rms_mm": c.fit.rms_mm, "structured_after": c.structured_after}
+                             "round": r + 1, "rms_mm": c.fit.rms_mm, "rms": c.fit.rms,
+                             "structured_after": c.structured_after}
                             for r, ranked in enumerate(diag.rounds) for c in ranked]
     result["whiteness_before"] = _whiteness(base)
     result["whiteness_after"] = _whiteness(final)
     result["localisation_before"] = base.localisation
-    result["noise_sigma_mm"] = {"before": dict(zip(base.ls.flight_names, (base.ls.sigma * 1e3).tolist())),
-                                "after": dict(zip(final.ls.flight_names, (final.ls.sigma * 1e3).tolist()))}
+    sig_b, sig_a = noise_scales(base), noise_scales(final)
+    marker_sigma = {f"sigma_{f}": f for f in base.rms_mm}
+    result["noise_sigma_mm"] = {"before": {f: sig_b[s]["value"] * 1e3 for s, f in marker_sigma.items()},
+                                "after": {f: sig_a[s]["value"] * 1e3 for s, f in marker_sigma.items()}}
+    result["noise_sigma"] = {"before": sig_b, "after": sig_a}
     result["coefficients_before"] = before_est
     result["coefficients_after"] = after_est
     result["model"] = {"base": list(base_ids), "final": list(final.ids)}

@@ -2,24 +2,27 @@
 
 Every candidate — the physics terms and data explanations of :mod:`bayes_disc.observation.registry`
 (``MODEL_EXTENSIONS``) not already in the model — is added to the model
-and the joint least-squares fit is refined from the base optimum. With the noise scale σ_f of every
-flight profiled out, the Gaussian log-likelihood is −½ Σ_f n_f ln S_f + const (S_f: the flight's summed
-squared marker residuals, n_f its coordinates), so the Bayesian information criterion in favour of
+and the joint least-squares fit is refined from the base optimum. With the noise scale σ_g of every
+noise group profiled out (one per marker flight; four per inertial throw: gyro axial/transverse,
+accelerometer axial/transverse), the Gaussian log-likelihood is −½ Σ_g n_g ln S_g + const (S_g: the
+group's summed squared residuals, n_g its residuals), so the Bayesian information criterion in favour of
 the candidate is
 
-    ΔBIC = Σ_f n_f ln(S_f,base / S_f,cand) − k ln N,
+    ΔBIC = Σ_g n_g ln(S_g,base / S_g,cand) − k ln N,
 
-k its extra parameters, N = Σ_f n_f. An extension must earn its place: ΔBIC > 10 ("very strong",
+k its extra parameters, N = Σ_g n_g. An extension must earn its place: ΔBIC > 10 ("very strong",
 Kass & Raftery 1995; a Bayes factor above e⁵) — for one parameter that is χ²₁ > 10 + ln N ≈ 18, a
 chance of 2e−5 when nothing is missing.
 
 Evidence alone would force any mismatch onto some term: a gust in one flight "improves" with a wind,
 a ground effect or a roll term, each absorbing a little of it. A candidate is therefore accepted only
-if it also explains the mismatch: after it, the residual series of every flight (six directions and
-three attitude angles, :mod:`.residuals`) are white by Ljung–Box at a Bonferroni-corrected level.
+if it also explains the mismatch: after it, the residual series of every flight (markers: six directions
+and three attitude angles; inertial: gyro and accelerometer along the sensor axes, :mod:`.residuals`) are
+white by Ljung–Box at a Bonferroni-corrected level.
 When no single candidate does, the strongest is combined with each of the others (at most two terms);
 structure that no candidate removes is reported as unexplained, with its flight, series and the time
-window where it is strongest.
+window where it is strongest. The data explanations of marker recordings (``marker_geometry``,
+``time_offset``) are candidates only when some flight has markers.
 """
 from __future__ import annotations
 
@@ -32,9 +35,10 @@ from scipy.optimize import least_squares
 from ..physics.parallel import mp_context
 from ..inference.leastsq import LeastSquaresResult, refine_least_squares, whitened_jacobian, whitened_residuals
 from ..inference.model import Problem
-from ..observation.registry import MODEL_EXTENSIONS
+from ..observation.models.markers import MarkerPositions
+from ..observation.registry import DATA_EXPLANATION, MODEL_EXTENSIONS, unit
 from ..physics import TERMS, literature_coefficients
-from .residuals import ROTATIONS, flight_residuals, localise, marker_series
+from .residuals import ROTATIONS, channel_runs, flight_residuals, localise
 
 #: every candidate, physics terms first
 CANDIDATES = MODEL_EXTENSIONS
@@ -48,9 +52,36 @@ MAX_TERMS = 2
 PAIR_PARTNERS = 3
 
 
+def applicable_candidates(problem: Problem, candidates=CANDIDATES) -> tuple[list, dict]:
+    """The candidates that can act on the problem's data, and {id: reason} for those skipped (data
+    explanations of marker recordings when no flight has markers).
+
+    Parameters
+    ----------
+    problem : Problem
+    candidates : sequence of str
+        Candidate ids (physics terms and data explanations).
+
+    Returns
+    -------
+    keep : list of str
+    skipped : dict
+        {id: reason in words}.
+    """
+    has_markers = any(isinstance(c, MarkerPositions) for ch in problem.channels for c in ch)
+    keep, skipped = [], {}
+    for cid in candidates:
+        if unit(cid).kind == DATA_EXPLANATION and not has_markers:
+            skipped[cid] = "explains marker recordings; no flight of the run has markers"
+        else:
+            keep.append(cid)
+    return keep, skipped
+
+
 @dataclass
 class ModelFit:
-    """A least-squares fit of one model: its extra term ids, problem, result, S_f [m²] and residuals."""
+    """A least-squares fit of one model: its extra term ids, problem, result, S_g per noise group [unit²]
+    and residual series."""
 
     ids: tuple
     problem: Problem
@@ -60,9 +91,24 @@ class ModelFit:
     localisation: dict = field(default_factory=dict)
 
     @property
+    def rms(self) -> dict:
+        """{flight: {channel: {"rms", "unit"}}}: RMS residual per recorded quantity of each flight
+        (``markers`` [m] per coordinate, ``gyro`` [rad/s], ``acc`` [m/s²] per sensor axis)."""
+        out = {}
+        for f, fr in zip(self.problem.flights, self.residuals):
+            acc = {}
+            for part, off in zip(fr.parts, fr.group_offsets):
+                for g, (chan, u) in enumerate(part.group_channels):
+                    s, n, _ = acc.get(chan, (0.0, 0, u))
+                    acc[chan] = (s + float(self.ss[off + g]), n + int(self.problem.n_coords[off + g]), u)
+            out[f.name] = {c: {"rms": float(np.sqrt(s / n)) if n else float("nan"), "unit": u}
+                           for c, (s, n, u) in acc.items()}
+        return out
+
+    @property
     def rms_mm(self) -> dict:
-        return {f.name: float(np.sqrt(s / n) * 1e3) for f, s, n in zip(self.problem.flights, self.ss,
-                                                                        self.problem.n_coords)}
+        """{flight: marker RMS [mm] per coordinate} of the flights with markers (SPEC §6)."""
+        return {f: d["markers"]["rms"] * 1e3 for f, d in self.rms.items() if "markers" in d}
 
 
 def model_fit(problem: Problem, ls: LeastSquaresResult, ids) -> ModelFit:
@@ -91,11 +137,12 @@ def extend_theta(theta: np.ndarray, source: Problem, target: Problem) -> np.ndar
     return target.layout.transfer(theta, source.layout, target.start_vector())
 
 
-def evidence(base: ModelFit, cand: ModelFit, flights: np.ndarray | None = None) -> float:
-    """ΔBIC of ``cand`` over ``base`` (module docstring), over all flights or the boolean mask ``flights``."""
+def evidence(base: ModelFit, cand: ModelFit, groups: np.ndarray | None = None) -> float:
+    """ΔBIC of ``cand`` over ``base`` (module docstring), over all noise groups or the boolean mask
+    ``groups`` (n_groups,)."""
     n = base.problem.n_coords.astype(float)
     gain = n * np.log(base.ss / cand.ss)
-    mask = np.ones(n.size, bool) if flights is None else flights
+    mask = np.ones(n.size, bool) if groups is None else groups
     k = cand.problem.n_ext - base.problem.n_ext
     return float(np.sum(gain[mask]) - k * np.log(np.sum(n[mask])))
 
@@ -115,16 +162,23 @@ class Candidate:
 
 
 def judge(base: ModelFit, cand_id: str, fit: ModelFit, threshold: float = EVIDENCE_THRESHOLD) -> Candidate:
-    gain = base.problem.n_coords * np.log(base.ss / fit.ss)
-    c = Candidate(cand_id, fit, evidence(base, fit), {f.name: float(g) for f, g in zip(base.problem.flights, gain)},
-                  structured(fit), extra_parameters=fit.problem.n_ext - base.problem.n_ext)
-    clean = np.array([not c.structured_after[f.name] for f in base.problem.flights])
+    """The candidate's ΔBIC, per-flight gain Σ_{g ∈ flight} n_g ln(S_g,base/S_g,cand), whiteness after, and
+    status (explains | insufficient | no_evidence)."""
+    p = base.problem
+    gain = p.n_coords * np.log(base.ss / fit.ss)
+    c = Candidate(cand_id, fit, evidence(base, fit),
+                  {f.name: float(np.sum(gain[p.flight_groups(k)])) for k, f in enumerate(p.flights)},
+                  structured(fit), extra_parameters=fit.problem.n_ext - p.n_ext)
+    clean = np.array([not c.structured_after[f.name] for f in p.flights])
     if c.delta_bic <= threshold:
         c.status = "no_evidence"
     else:
         c.status = "explains" if clean.all() else "insufficient"
         if clean.any():
-            c.clean_evidence = evidence(base, fit, clean)
+            mask = np.zeros(p.n_groups, bool)
+            for k in np.flatnonzero(clean):
+                mask[p.flight_groups(k)] = True
+            c.clean_evidence = evidence(base, fit, mask)
     return c
 
 
@@ -227,6 +281,17 @@ def diagnose(base: ModelFit, build, processes: int = 1, max_nfev: int = 200, can
 ONSET_MIN_S = 0.15
 
 
+def onset_unavailable(problem: Problem, k: int) -> str | None:
+    """Why the onset search cannot run on flight k (None when it can): it refits a window of a flight's
+    marker recording, so the flight must be observed by markers alone."""
+    ch = problem.channels[k]
+    if len(ch) == 1 and isinstance(ch[0], MarkerPositions):
+        return None
+    return ("not searched: the onset search refits the first part of a marker recording; this flight is "
+            "observed by " + ", ".join(c.id for c in ch) + " (a window of an inertial log would start with "
+            "an unknown filter state)")
+
+
 def _prefix_is_white(fit: ModelFit, k: int, t_end: float, alpha: float) -> bool:
     """Whether flight k's first part [t_0, t_end], refitted over its 12 initial conditions with the
     coefficients and extra parameters of ``fit`` held, leaves white residuals (all nine series)."""
@@ -251,7 +316,10 @@ def _prefix_is_white(fit: ModelFit, k: int, t_end: float, alpha: float) -> bool:
 def onset_of_mismatch(fit: ModelFit, k: int, alpha: float = STRUCTURE_ALPHA) -> float | None:
     """Time [s from the flight's start] up to which the model still follows flight k (its first part
     refits to white residuals), by bisection over the sample times; None if even the first
-    ONSET_MIN_S seconds are structured."""
+    ONSET_MIN_S seconds are structured. Marker-only flights (:func:`onset_unavailable`)."""
+    why = onset_unavailable(fit.problem, k)
+    if why is not None:
+        raise ValueError(f"flight {fit.problem.flights[k].name!r}: {why}")
     t = fit.problem.flights[k].times
     lo = int(np.searchsorted(t, t[0] + ONSET_MIN_S))
     hi = t.size - 1
@@ -269,26 +337,40 @@ def onset_of_mismatch(fit: ModelFit, k: int, alpha: float = STRUCTURE_ALPHA) -> 
 # -- description ----------------------------------------------------------------------------------------
 
 def term_signature(fit: ModelFit, names) -> list[dict]:
-    """What the extra parameters ``names`` do in ``fit``: per flight, the noise-free change of the
-    predicted markers when they are switched off (same initial conditions and coefficients), as the
-    series of :func:`.residuals.marker_series` [m, rad], plus the change's acceleration along each
-    direction [m/s²] and the flight's covariates."""
+    """What the extra parameters ``names`` do in ``fit``: per flight, the noise-free change of every
+    channel's prediction when they are switched off (same initial conditions and coefficients), as the
+    series of its observation model's ``residual_series`` (markers [m, rad], inertial [rad/s, m/s²]).
+
+    Returns
+    -------
+    list of dict
+        Per flight: ``series`` {name: (n,)} (on − off); ``times`` [s from the start], ``covariates``,
+        ``units`` and ``groups`` (the model's noise group) per series name; ``accel`` {marker direction:
+        (n,) second derivative [m/s²]}; ``acc_change`` ((n,) |Δ accelerometer| [m/s²] of an inertial
+        channel, or None).
+    """
     p = fit.problem
     off = fit.ls.theta.copy()
     for j, par in enumerate(p.ext_parameters, start=p.n_coef):
         if par.name in names:
             off[j] = par.off_value
     out = []
-    for k, f in enumerate(p.flights):
-        on_tr, off_tr = p.simulate(fit.ls.theta[None], k), p.simulate(off[None], k)
-        st, pred = on_tr.states[0], on_tr.markers[0]
-        diff = pred - off_tr.markers[0]
-        _, proj, rot, _ = marker_series(diff, st, pred, np.ones(diff.shape[:2], bool),
-                                        p.conditions(st, fit.ls.theta, k))
-        dt = np.diff(f.times).mean()
-        accel = {n: np.gradient(np.gradient(x, dt), dt) for n, x in proj.items()}
-        out.append({"times": f.times - f.times[0], "series": proj | rot, "accel": accel,
-                    "covariates": fit.residuals[k].covariates})
+    for k in range(p.n_flights):
+        on_runs, off_runs = channel_runs(p, fit.ls.theta, k), channel_runs(p, off, k)
+        g = {"series": {}, "times": {}, "covariates": {}, "units": {}, "groups": {}, "accel": {}, "acc_change": None}
+        for (c, tr, extra, pred, air), (_, _, _, pred_off, _) in zip(on_runs, off_runs):
+            rs = c.residual_series(tr, extra, pred, air, reference=pred_off)      # off − on
+            for n, x in rs.series.items():
+                g["series"][n] = -x
+                g["times"][n], g["covariates"][n], g["units"][n] = rs.times - rs.times[0], rs.covariates, rs.units[n]
+                g["groups"][n] = rs.groups[n]
+                if rs.units[n] == "m":
+                    dt = np.diff(rs.times).mean()
+                    g["accel"][n] = np.gradient(np.gradient(-x, dt), dt)
+            acc = [n for n in rs.series if n.startswith("acc_")]
+            if acc:
+                g["acc_change"] = np.sqrt(sum(rs.series[n] ** 2 for n in acc))
+        out.append(g)
     return out
 
 
@@ -328,12 +410,14 @@ def attitude_offset(fit: ModelFit, z_min: float = 5.0) -> dict | None:
     best, best_z = None, z_min
     for name in ROTATIONS:
         z, means = [], {}
-        for fr, s in zip(fit.residuals, fit.ls.sigma):
-            x = fr.rotations[name]
+        for fr in fit.residuals:
+            if not fr.has(name):
+                continue
+            x = fr.series[name]
             ok = np.isfinite(x)
             if ok.sum() < 3:
                 continue
-            se = s * np.sqrt(np.sum(fr.unit_se[name][ok] ** 2)) / ok.sum()
+            se = np.sqrt(np.sum(fr.se(name, fit.ls.sigma)[ok] ** 2)) / ok.sum()
             means[fr.name] = float(np.degrees(np.mean(x[ok])))
             z.append(abs(np.mean(x[ok])) / se)
         if z and np.median(z) > best_z:
@@ -341,46 +425,82 @@ def attitude_offset(fit: ModelFit, z_min: float = 5.0) -> dict | None:
     return best
 
 
+def _rms(x: np.ndarray) -> float:
+    return float(np.sqrt(np.nanmean(x ** 2))) if np.isfinite(x).any() else float("nan")
+
+
 def fingerprint(before: ModelFit, after: ModelFit, names) -> dict:
     """Where the mismatch sat (the base fit's structured series and flights) and what the accepted
-    parameters ``names`` do: main direction of their effect, its growth t^k, whether its sign follows the
-    spin across flights, and how its force (along the main direction) tracks α, α², speed, speed² and height
-    (|correlation|, median over flights)."""
+    parameters ``names`` do.
+
+    Marker flights (when the run has any): main direction of the effect on the markers, its growth t^k,
+    whether its sign follows the spin across flights, and how its force (second derivative along the main
+    direction) tracks α, α², speed, speed² and height (|correlation|, median over flights). Inertial flights
+    only: the sensor series it changes most relative to its noise, and how the size of its accelerometer
+    change |Δa| tracks the same flight quantities; growth and spin sign are not read (the sensor axes
+    turn with the disc).
+    """
     struct = structured(before)
     ratio = {}
     for per in before.localisation.values():
         for s, d in per.items():
             ratio.setdefault(s, []).append(d["noise_ratio"])
     sig = term_signature(after, names)
+    common = {"structured_before": struct, "attitude_offset_before": attitude_offset(before),
+              "noise_ratio_before": {s: float(np.median(v)) for s, v in ratio.items()}}
+    corr = {c: [] for c in LINKS}
+    marker = [g for g in sig if "along" in g["series"]]
+    if not marker:
+        z, size = {}, {}
+        for fr, g in zip(after.residuals, sig):
+            for n, x in g["series"].items():
+                rms = _rms(x)
+                size.setdefault(n, []).append(rms)
+                z.setdefault(n, []).append(rms / after.ls.sigma[fr.group(n)])
+            if g["acc_change"] is not None:
+                cov = next(g["covariates"][n] for n in g["series"] if n.startswith("acc_"))
+                for c, f in LINKS.items():
+                    corr[c].append(abs(_corr(g["acc_change"], f(cov))))
+        zm = {n: float(np.nanmedian(v)) for n, v in z.items()}
+        main = max(zm, key=zm.get)
+        units = sig[0]["units"]
+        return common | {"channel": "inertial", "effect_series": main, "effect_rotation": None,
+                         "effect_size": {n: {"rms": float(np.nanmedian(size[n])), "unit": units[n],
+                                             "noise_ratio": zm[n]} for n in zm},
+                         "growth_exponent": None, "sign_follows_spin": None,
+                         "force_correlation": {c: float(np.median(v)) if v else 0.0 for c, v in corr.items()}}
     size = {n: np.median([np.sqrt(np.nanmean(g["series"][n] ** 2)) * (LEVER_ARM if n in ROTATIONS else 1.0)
-                          for g in sig]) for n in sig[0]["series"]}
+                          for g in marker]) for n in marker[0]["series"] if all(n in g["series"] for g in marker)}
     trans = [n for n in size if n not in ROTATIONS]
     main = max(trans, key=size.get)
     main_rot = max(ROTATIONS, key=size.get)
-    growth, corr, signs = [], {c: [] for c in LINKS}, []
-    for g in sig:
-        growth.append(_growth_exponent(g["times"], g["series"][main]))
+    growth, signs = [], []
+    for g in marker:
+        growth.append(_growth_exponent(g["times"][main], g["series"][main]))
         for c, f in LINKS.items():
-            corr[c].append(abs(_corr(g["accel"][main], f(g["covariates"]))))
+            corr[c].append(abs(_corr(g["accel"][main], f(g["covariates"][main]))))
         x = g["series"][main]
-        signs.append((float(np.sign(x[np.nanargmax(np.abs(x))])), float(np.sign(np.mean(g["covariates"]["spin"])))))
+        signs.append((float(np.sign(x[np.nanargmax(np.abs(x))])),
+                      float(np.sign(np.mean(g["covariates"][main]["spin"])))))
     follows = None
     if len({s for _, s in signs}) > 1:
         follows = len({a * s for a, s in signs if a != 0}) == 1
     growth = [x for x in growth if np.isfinite(x)]
-    offset = attitude_offset(before)
-    return {"structured_before": struct, "attitude_offset_before": offset,
-            "noise_ratio_before": {s: float(np.median(v)) for s, v in ratio.items()},
-            "effect_series": main, "effect_rotation": main_rot if size[main_rot] > 0.5 * size[main] else None,
-            "effect_size_mm": {n: float(v * 1e3) for n, v in size.items()},
-            "growth_exponent": float(np.median(growth)) if growth else None,
-            "force_correlation": {c: float(np.median(v)) for c, v in corr.items()}, "sign_follows_spin": follows}
+    return common | {"channel": "markers", "effect_series": main,
+                     "effect_rotation": main_rot if size[main_rot] > 0.5 * size[main] else None,
+                     "effect_size_mm": {n: float(v * 1e3) for n, v in size.items()},
+                     "growth_exponent": float(np.median(growth)) if growth else None,
+                     "force_correlation": {c: float(np.median(v)) for c, v in corr.items()},
+                     "sign_follows_spin": follows}
 
 
 SERIES_WORDS = {"along": "along-track", "lateral": "lateral", "normal": "vertical (flight-path normal)",
                 "d1": "disc-plane forward (d1)", "d2": "disc-plane sideways (d2)", "d3": "disc-normal (d3)",
                 "roll": "roll attitude (about d1)", "pitch": "pitch attitude (about d2)",
-                "spin_phase": "spin phase (about d3)"}
+                "spin_phase": "spin phase (about d3)",
+                "gyro_x": "gyro x (sensor axis)", "gyro_y": "gyro y (sensor axis)", "gyro_z": "gyro z (spin axis)",
+                "acc_x": "accelerometer x (sensor axis)", "acc_y": "accelerometer y (sensor axis)",
+                "acc_z": "accelerometer z (disc normal)"}
 
 
 def describe_where(fp: dict, n_flights: int) -> str:
@@ -398,8 +518,12 @@ def describe_where(fp: dict, n_flights: int) -> str:
         vals = list(off["mean_deg"].values())
         text += (f" (the base fit makes up for it with the attitude: measured − fitted "
                  f"{SERIES_WORDS[off['rotation']].split(' (')[0]} {min(vals):+.1f}…{max(vals):+.1f}° on average)")
-    effect = [f"the term moves the markers mainly {SERIES_WORDS[fp['effect_series']]}"
-              + (f" and turns the {SERIES_WORDS[fp['effect_rotation']]}" if fp["effect_rotation"] else "")]
+    if fp.get("channel") == "inertial":
+        effect = [f"the term changes mainly the {SERIES_WORDS[fp['effect_series']]} "
+                  f"({fp['effect_size'][fp['effect_series']]['noise_ratio']:.1f}× its noise)"]
+    else:
+        effect = [f"the term moves the markers mainly {SERIES_WORDS[fp['effect_series']]}"
+                  + (f" and turns the {SERIES_WORDS[fp['effect_rotation']]}" if fp["effect_rotation"] else "")]
     g = fp["growth_exponent"]
     if g is not None:
         effect.append(f"growing ∝ t^{g:.1f}")
@@ -409,6 +533,7 @@ def describe_where(fp: dict, n_flights: int) -> str:
         effect.append("sign independent of spin")
     c = fp["force_correlation"]
     best = max(c, key=c.get)
-    effect.append(f"its force tracks {best} best (|r| {c[best]:.2f})" if c[best] > LINK_CORRELATION
-                  else "its force follows no single flight quantity")
+    what = "its accelerometer change" if fp.get("channel") == "inertial" else "its force"
+    effect.append(f"{what} tracks {best} best (|r| {c[best]:.2f})" if c[best] > LINK_CORRELATION
+                  else f"{what} follows no single flight quantity")
     return f"{text}; {', '.join(effect)}"

@@ -10,6 +10,11 @@ vectors whose simulated trajectories are given:
   with each σ_g integrated out under its Jeffreys prior p(σ_g) ∝ 1/σ_g (:func:`gaussian_marginal_loglik`);
 * ``draw_noise(ss, rng)``: σ_g drawn exactly from σ_g² | θ, y ~ S_g / χ²_{n_g}.
 
+Optionally (diagnostics and the report) ``residual_series(trajectories, extra, prediction, conditions)``:
+the model's residuals as named (n,) series in physical directions, with their standard errors per unit
+noise scale, the noise group of each, and the flight's covariates on the series' time grid
+(:class:`ResidualSeries`).
+
 ``times`` is the grid (s, starting at the flight's release or first sample) on which the flight must be
 simulated for this model. It also names its noise groups (``noise_names``, the public names of the σ_g), the data explanations it
 applies (``explanation_ids``: their parameters are shared by every flight and sit in the parameter
@@ -19,6 +24,7 @@ prior scales; none for markers). ``needs_states`` tells the simulator whether fu
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
@@ -45,6 +51,48 @@ def gaussian_marginal_loglik(ss: np.ndarray, n: np.ndarray) -> np.ndarray:
     n = np.asarray(n, float)
     const = gammaln(n / 2) - np.log(2.0) - 0.5 * n * np.log(np.pi)
     return np.sum(const - 0.5 * n * np.log(ss), axis=1)
+
+
+#: covariates every :class:`ResidualSeries` carries (units: rad, m/s, rad/s, m, s)
+COVARIATES = ("alpha", "speed", "spin", "height", "time")
+
+
+@dataclass
+class ResidualSeries:
+    """One observation model's residuals of one flight as named series (diagnostics and the report).
+
+    Attributes
+    ----------
+    times : (n,) array
+        Times of the series [s], on the model's clock: the recorded sample times for markers, since
+        release for inertial logs (the ``time`` covariate always counts from the flight's start).
+    series : dict
+        {name: (n,) array} reference − prediction (by default measured − predicted) in physical
+        directions, in the unit ``units[name]``; NaN where the data have nothing.
+    unit_se : dict
+        {name: (n,) array} standard error of each sample per unit noise scale σ of its group.
+    groups : dict
+        {name: int} the model's noise group (index into ``noise_names``) whose σ scales the series.
+    units : dict
+        {name: str} unit of each series ("m", "rad", "rad/s", "m/s²").
+    covariates : dict
+        {name: (n,) array} the flight's α [rad], air speed [m/s], spin r [rad/s], height z [m] and time [s]
+        along the predicted trajectory, on ``times`` (names: :data:`COVARIATES`).
+    primary : tuple of str
+        The series whose whitened squares locate the strongest structure (peak window).
+    group_channels : tuple of (str, str)
+        Per noise group of the model: the recorded quantity it belongs to ("markers", "gyro", "acc") and
+        its unit — the channels of the per-flight RMS.
+    """
+
+    times: np.ndarray
+    series: dict
+    unit_se: dict
+    groups: dict
+    units: dict
+    covariates: dict
+    primary: tuple
+    group_channels: tuple
 
 
 class ObservationModel(ABC):
@@ -114,6 +162,30 @@ class ObservationModel(ABC):
     @abstractmethod
     def residuals(self, prediction: np.ndarray) -> np.ndarray:
         """(B, n_res) predicted − measured on the observed entries."""
+
+    def residual_series(self, trajectories, extra: np.ndarray | None, prediction: np.ndarray, conditions,
+                        reference: np.ndarray | None = None) -> ResidualSeries:
+        """Optional: the residuals as named series for diagnostics and the report.
+
+        Parameters
+        ----------
+        trajectories : Trajectories
+            One parameter vector's simulation (B = 1) on :attr:`times`, states included.
+        extra : (1, k) array or None
+            The values of the model's explanation and own parameters (as for :meth:`predict`).
+        prediction : array
+            :meth:`predict` of ``trajectories`` and ``extra`` (leading axis B = 1).
+        conditions : FlightConditions
+            Air-relative flight conditions along ``trajectories.states[0]`` (on :attr:`times`).
+        reference : array, optional
+            Another prediction (same shape as ``prediction``) to difference against instead of the
+            measured data (the effect of a term: reference − prediction, every entry used).
+
+        Returns
+        -------
+        ResidualSeries
+        """
+        raise NotImplementedError(f"observation model {self.id!r} gives no residual series")
 
     def sum_squares(self, residuals: np.ndarray) -> np.ndarray:
         """(B, n_groups) sums of squared residuals per noise group."""

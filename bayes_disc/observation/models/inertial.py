@@ -29,6 +29,12 @@ Parameters — shared by the run's throws (one logger, one mount): ``imu_offset_
 imu_offset_z`` (r_s, m), ``imu_lpf_tau`` (s), ``imu_tilt_1, imu_tilt_2`` (ε, rad); per throw:
 ``imu_period`` (s, logs without time column), ``gyro_bias_x…z`` (rad/s), ``acc_bias_x…z`` (m/s²),
 ``lpf_state_x…z`` (y_0, m/s²).
+
+Residual series (diagnostics): measured − predicted gyro and accelerometer along the sensor axes
+(``gyro_x…z`` [rad/s], ``acc_x…z`` [m/s²]), each scaled by its noise group's σ (unit standard error 1),
+at the samples t_i of the parameter vector; the covariates (α, air speed, spin, height) are interpolated
+from the simulation grid onto t_i. No projection on flight frames: the filter acts in sensor axes, so a
+rotated, filtered specific force has no clean flight-frame component.
 """
 from __future__ import annotations
 
@@ -40,7 +46,7 @@ import numpy as np
 from ...physics import TermParameter
 from ...physics.frames import quat_from_rotvec, quat_to_matrix
 from ..imu.formats import InertialLog
-from .base import ObservationModel
+from .base import ObservationModel, ResidualSeries
 
 #: fine simulation points per nominal row period
 OVERSAMPLE = 4
@@ -56,6 +62,10 @@ SHARED_PARAMETERS = (
     TermParameter("imu_tilt_2", "rad", "sensor tilt from the body axes about b2", 0.0, 0.05),
 )
 GROUPS = ("gyro_axial", "gyro_transverse", "acc_axial", "acc_transverse")
+#: the residual series (sensor axes), their noise groups and units
+SERIES = ("gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z")
+SERIES_GROUPS = (1, 1, 0, 3, 3, 2)
+SERIES_UNITS = ("rad/s",) * 3 + ("m/s²",) * 3
 
 
 @nb.njit(cache=True)
@@ -247,7 +257,7 @@ class InertialMeasurements(ObservationModel):
         self._seen = np.isfinite(data)
         self._obs = data[self._seen]
         channel = np.broadcast_to(np.arange(6), data.shape)[self._seen]
-        self._groups = np.array([1, 1, 0, 3, 3, 2])[channel].astype(np.intp)
+        self._groups = np.array(SERIES_GROUPS)[channel].astype(np.intp)
 
     # -- contract ------------------------------------------------------------------------------------
     @property
@@ -313,3 +323,20 @@ class InertialMeasurements(ObservationModel):
 
     def residuals(self, prediction: np.ndarray) -> np.ndarray:
         return prediction[:, self._seen] - self._obs[None]
+
+    def residual_series(self, trajectories, extra, prediction, conditions, reference=None) -> ResidualSeries:
+        """Gyro and accelerometer residuals along the sensor axes at the samples (module docstring);
+        contract: :meth:`.base.ObservationModel.residual_series`."""
+        p = self.split(extra)
+        t = self.sample_times_for(p["period"])[0]
+        ref = np.concatenate([self.log.gyro, self.log.acc], axis=1) if reference is None else reference[0]
+        diff = ref - prediction[0]
+        st = trajectories.states[0]
+        grid = np.asarray(self.times, float)
+        cov = {"alpha": np.interp(t, grid, conditions.alpha[0]), "speed": np.interp(t, grid, conditions.speed[0]),
+               "spin": np.interp(t, grid, st[:, 12]), "height": np.interp(t, grid, st[:, 2]), "time": t.copy()}
+        return ResidualSeries(times=t.copy(), series={n: diff[:, j] for j, n in enumerate(SERIES)},
+                              unit_se={n: np.ones(t.size) for n in SERIES},
+                              groups=dict(zip(SERIES, SERIES_GROUPS)), units=dict(zip(SERIES, SERIES_UNITS)),
+                              covariates=cov, primary=SERIES,
+                              group_channels=(("gyro", "rad/s"), ("gyro", "rad/s"), ("acc", "m/s²"), ("acc", "m/s²")))

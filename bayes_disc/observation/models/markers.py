@@ -9,6 +9,19 @@ offsets Δ_j [m] and timing offsets δ_j [s] are the data explanations ``marker_
 ``time_offset`` (:mod:`bayes_disc.observation.explanations`; zero unless the model includes them).
 Every observed coordinate is y = m + ε, ε ~ N(0, σ_f²) independent, with one noise scale σ_f [m] per
 flight (public name ``sigma_<flight>``), prior p(σ_f) ∝ 1/σ_f, integrated out analytically.
+
+Residual series (diagnostics): the residuals r = measured − predicted [m] are averaged over the markers
+seen at each sample (r̄(t), standard error σ/√n_seen per component) and projected on two frames:
+
+* flight path: along-track t̂ = v̂, lateral ŝ = (ẑ × v̂)/|ẑ × v̂| (to the left), normal n̂ = t̂ × ŝ (up);
+* disc (velocity-aligned D frame of SPEC §1): d1, d2 (to the right), d3 = b3 (down through the disc).
+
+The markers' spread about their mean carries the attitude residual: the small rotation δθ [rad] that
+best maps the predicted lever arms p̃_j = p_j − p̄ onto the measured ones,
+
+    δθ = (Σ_j |p̃_j|² I − p̃_j p̃_jᵀ)⁻¹ Σ_j p̃_j × (r_j − r̄),
+
+projected as roll (about d1), pitch (about d2) and spin phase (about d3).
 """
 from __future__ import annotations
 
@@ -18,7 +31,94 @@ import numpy as np
 
 from ..explanations import DataExplanation, predicted_markers
 from ..markers import FlightObservation
-from .base import ObservationModel
+from .base import ObservationModel, ResidualSeries
+
+#: the translation series of the marker model [m]
+DIRECTIONS = ("along", "lateral", "normal", "d1", "d2", "d3")
+#: the attitude series [rad]
+ROTATIONS = ("roll", "pitch", "spin_phase")
+
+
+def flight_axes(states: np.ndarray, conditions) -> dict:
+    """Unit vectors (n, 3) of the flight-path frame (along, lateral, normal: ground-relative velocity) and
+    the D frame (d1, d2, d3: air-relative, from ``conditions``, the
+    :class:`~bayes_disc.physics.FlightConditions` of the same states) along states (n, 13)."""
+    v = states[:, 3:6]
+    t_hat = v / np.linalg.norm(v, axis=1, keepdims=True)
+    s = np.cross(np.array([0.0, 0.0, 1.0]), t_hat)
+    s_hat = s / np.linalg.norm(s, axis=1, keepdims=True)
+    n_hat = np.cross(t_hat, s_hat)
+    return {"along": t_hat, "lateral": s_hat, "normal": n_hat,
+            "d1": conditions.d1[0], "d2": conditions.d2[0], "d3": conditions.d3[0]}
+
+
+def attitude_residual(res: np.ndarray, arms: np.ndarray, seen: np.ndarray, axes: dict) -> tuple[dict, dict]:
+    """Attitude residual δθ (module docstring) at samples where every marker is seen, projected on d1, d2,
+    d3; and its standard error per unit marker noise.
+
+    Parameters
+    ----------
+    res, arms : (n, m, 3) arrays
+        Per-marker differences (zero where unseen) and predicted lever arms from the centre of mass [m].
+    seen : (n, m) bool array
+    axes : dict
+        :func:`flight_axes` of the flight.
+
+    Returns
+    -------
+    rot : dict
+        {roll, pitch, spin_phase: (n,)} [rad], NaN unless every marker (at least 3) is seen.
+    se : dict
+        {same: (n,)} standard error per unit marker noise [rad/m].
+    """
+    n, m, _ = res.shape
+    full = np.all(seen, axis=1) & (m >= 3)
+    p = arms - arms.mean(axis=1, keepdims=True)
+    d = res - res.mean(axis=1, keepdims=True)
+    A = np.einsum("njc,njc->n", p, p)[:, None, None] * np.eye(3) - np.einsum("nji,njk->nik", p, p)
+    b = np.cross(p, d).sum(axis=1)
+    A = np.where(full[:, None, None], A, np.eye(3))
+    theta = np.linalg.solve(A, b[..., None])[..., 0]
+    Ainv = np.linalg.inv(A)
+    rot, se = {}, {}
+    for name, axis in zip(ROTATIONS, ("d1", "d2", "d3")):
+        a = axes[axis]
+        rot[name] = np.where(full, np.einsum("ni,ni->n", theta, a), np.nan)
+        se[name] = np.sqrt(np.einsum("ni,nik,nk->n", a, Ainv, a))
+    return rot, se
+
+
+def marker_series(diff: np.ndarray, states: np.ndarray, markers: np.ndarray, seen: np.ndarray, conditions):
+    """Series of a per-marker difference.
+
+    Parameters
+    ----------
+    diff : (n, m, 3) array
+        Per-marker difference [m] (finite where ``seen``).
+    states : (n, 13) array
+        Predicted states.
+    markers : (n, m, 3) array
+        Predicted markers [m].
+    seen : (n, m) bool array
+    conditions : FlightConditions
+        Of the states.
+
+    Returns
+    -------
+    r : (n, 3) array
+        Marker mean r̄ [m] (NaN where nothing was seen).
+    proj : dict
+        {direction: (n,)} projections of r̄ [m].
+    rot, rot_se : dict
+        Attitude angles [rad] and their standard errors per unit noise (:func:`attitude_residual`).
+    """
+    n_seen = np.sum(seen, axis=1)
+    total = np.sum(np.where(seen[..., None], diff, 0.0), axis=1)
+    r = np.where(n_seen[:, None] > 0, total / np.maximum(n_seen, 1)[:, None], np.nan)
+    axes = flight_axes(states, conditions)
+    proj = {name: np.einsum("ni,ni->n", r, axis) for name, axis in axes.items()}
+    rot, rot_se = attitude_residual(np.where(seen[..., None], diff, 0.0), markers - states[:, None, 0:3], seen, axes)
+    return r, proj, rot, rot_se
 
 
 @dataclass(eq=False)
@@ -102,3 +202,22 @@ class MarkerPositions(ObservationModel):
     def residuals(self, prediction: np.ndarray) -> np.ndarray:
         r = prediction[:, self._mask] - self._obs[None]
         return r.reshape(r.shape[0], -1)
+
+    def residual_series(self, trajectories, extra, prediction, conditions, reference=None) -> ResidualSeries:
+        """Marker mean projected on the flight-path and D frames [m] and the attitude residual [rad]
+        (module docstring); contract: :meth:`.base.ObservationModel.residual_series`."""
+        st, pred = trajectories.states[0], prediction[0]
+        if reference is None:
+            seen, ref = self._mask, self.data.positions
+        else:
+            seen, ref = np.ones(pred.shape[:2], bool), reference[0]
+        n_seen = np.sum(seen, axis=1)
+        _, proj, rot, rot_se = marker_series(np.where(seen[..., None], ref - pred, 0.0), st, pred, seen, conditions)
+        names = DIRECTIONS + ROTATIONS
+        cov = {"alpha": conditions.alpha[0], "speed": conditions.speed[0], "spin": st[:, 12],
+               "height": st[:, 2], "time": self.times - self.times[0]}
+        unit_se = {name: 1.0 / np.sqrt(np.maximum(n_seen, 1)) for name in DIRECTIONS} | rot_se
+        return ResidualSeries(times=self.times, series=proj | rot, unit_se=unit_se,
+                              groups={n: 0 for n in names}, units={n: "m" if n in DIRECTIONS else "rad" for n in names},
+                              covariates=cov, primary=("along", "lateral", "normal"),
+                              group_channels=(("markers", "m"),))
