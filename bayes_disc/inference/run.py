@@ -27,7 +27,9 @@ import numpy as np
 
 from ..observation.config_io import ConfigError
 from .config import RunConfig
+from ..observation.models import MarkerPositions
 from .data import build_problem
+from .inertial import load_run_throws
 from .leastsq import fit_least_squares
 from .results import build_inference_data, build_summary, format_table
 from .profile import profile_paths
@@ -81,8 +83,29 @@ def stage(name: str, what: str = "") -> Iterator[Stage]:
 
 
 def _flight_info(problem) -> dict:
-    return {f.name: {"file": f.source, "samples": int(f.times.size), "points": int(f.n_points),
-                     "t_start": float(f.times[0]), "t_end": float(f.times[-1])} for f in problem.flights}
+    """Per flight: its recordings (marker samples and points; inertial rows) and their time span."""
+    out = {}
+    for k, f in enumerate(problem.flights):
+        rec = {"file": f.source}
+        for c in problem.channels[k]:
+            if isinstance(c, MarkerPositions):
+                rec.update(samples=int(c.data.times.size), points=int(c.data.n_points),
+                           t_start=float(c.data.times[0]), t_end=float(c.data.times[-1]))
+            else:
+                rec.update(inertial_rows=int(len(c.row_offsets)), inertial_values=int(c.group_index.size),
+                           rows_since_release=int(c.row_offsets[-1]))
+        out[f.name] = rec
+    return out
+
+
+def _data_words(problem) -> str:
+    """"3 flights, 1200 marker points, 5400 inertial values"."""
+    markers = sum(int(c.data.n_points) for ch in problem.channels for c in ch if isinstance(c, MarkerPositions))
+    inertial = sum(int(c.group_index.size) for ch in problem.channels for c in ch
+                   if not isinstance(c, MarkerPositions))
+    words = [f"{problem.n_flights} flights"] + ([f"{markers} marker points"] if markers else []) \
+        + ([f"{inertial} inertial values"] if inertial else [])
+    return ", ".join(words)
 
 
 def run_key(cfg: RunConfig, problem) -> dict:
@@ -283,9 +306,12 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
     out = Path(cfg.output)
     out.mkdir(parents=True, exist_ok=True)
     with stage("reading flights and checks") as st:
-        problem = build_problem(cfg)
-        st.result = (f"{cfg.name}: {problem.n_flights} flights, {int(problem.n_coords.sum() // 3)} marker points, "
-                     f"{problem.dim} parameters")
+        throws = load_run_throws(cfg) if cfg.imu else []
+        problem = build_problem(cfg, throws=throws)
+        st.result = f"{cfg.name}: {_data_words(problem)}, {problem.dim} parameters"
+        for t in throws:
+            if t.status != "ok":
+                logger.info(f"{t.name}: {t.status}: {t.reason}")
     if resume and (out / "chains" / RUN_KEY).is_file():
         check_same_run(cfg, problem, out)       # before counting chain files: the ensembles may differ
     steps = saved_steps(out, cfg.sampler.ensembles) if resume else None
@@ -316,6 +342,8 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
     with stage("outputs", "summary.json, posterior.nc, run_info.json"):
         info = {"name": cfg.name, "config": str(cfg.path), "flights": _flight_info(problem),
                 "sampler_settings": asdict(cfg.sampler), "markers": cfg.markers}
+        if throws:
+            info["inertial_throws"] = {t.name: t.to_dict() for t in throws}
         idata = build_inference_data(problem, chains, np.random.default_rng(cfg.sampler.seed))
         summary = build_summary(problem, chains, idata, ls_dict, info)
         (out / "summary.json").write_text(json.dumps(summary, indent=1))

@@ -120,7 +120,7 @@ def _advance(task) -> int:
 @dataclass
 class Chains:
     """Post-burn-in samples: chain (n_ensembles, n_steps, n_walkers, dim), log_prob alike without dim,
-    σ per flight (n_ensembles, n_steps, n_walkers, n_flights) drawn from its exact conditional."""
+    σ per noise group (n_ensembles, n_steps, n_walkers, n_groups) drawn from its exact conditional."""
 
     chain: np.ndarray
     log_prob: np.ndarray
@@ -501,7 +501,7 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
         raise RuntimeError(f"{chain_dir}: ensembles of unequal length {sorted(lengths)} after sampling")
     # no convergence check (the cap came during the warm-up): the warm-up is burn-in, at most half the chain
     burn = verdict["burn"] if checked is not None else min(adapt_at[-1], chain.shape[1] // 2)
-    sigma = problem.draw_sigma(ss[:, burn:].reshape(-1, problem.n_flights),
+    sigma = problem.draw_sigma(ss[:, burn:].reshape(-1, problem.n_groups),
                                np.random.default_rng(settings.seed)).reshape(ss[:, burn:].shape)
     reason = ("converged" if verdict["converged"] else
               f"cap of {settings.max_steps} steps reached before convergence")
