@@ -27,6 +27,7 @@ imu:                                     # inertial logs (instead of or besides 
   - file: data/2025-08-31-002-rb.csv
     format: flatball-ins                 # or imu-csv
     throws: [[1007, 1344]]               # optional: release and first-impact rows per throw (default: found)
+credit: "where the data come from"       # shown in the report wherever the data are shown (licences)
 ```
 """
 from __future__ import annotations
@@ -100,6 +101,7 @@ class RunConfig:
     flight_options: dict = field(default_factory=dict)
     truth: Path | None = None
     imu: tuple[ImuSource, ...] = ()
+    credit: str = ""
 
     @property
     def marker_ids(self) -> tuple[str, ...]:
@@ -216,6 +218,7 @@ def config_from_mapping(data: dict, path, output_override=None) -> RunConfig:
         if fo.t_start is not None and fo.t_end is not None and fo.t_end <= fo.t_start:
             raise ConfigError(path, f"flight_options.{fname}.t_end", "must be after t_start")
         flight_options[str(fname)] = fo
+    credit = sec.string("credit", None) or ""
     truth = sec.string("truth", None)
     truth_path = path.parent / truth if truth else None
     if truth_path is not None and not truth_path.is_file():
@@ -224,7 +227,7 @@ def config_from_mapping(data: dict, path, output_override=None) -> RunConfig:
     return RunConfig(path=path, name=name, files=tuple(files), markers=markers, disc=disc, env=env, prior=prior,
                      output=output, sampler=sampler, least_squares=least, simulator_method=method,
                      simulator_step_factor=step, physics=physics, flight_options=flight_options, truth=truth_path,
-                     imu=imu)
+                     imu=imu, credit=credit)
 
 
 def _read_imu(path: Path, sec: Section) -> tuple[ImuSource, ...]:

@@ -193,6 +193,11 @@ class Problem:
         """(n_res_k,) noise-group index (into :attr:`sigma_names`) of each of flight k's residuals."""
         return self._residual_groups[k]
 
+    def channel_columns(self, k: int) -> list[np.ndarray]:
+        """Per observation model of flight k, the θ indices of the parameters it reads besides the flight's
+        initial conditions (explanations or shared parameters, then its own)."""
+        return list(self._columns[k])
+
     def channel_groups(self, k: int) -> list[slice]:
         """Per observation model of flight k, the slice of its noise groups in :attr:`sigma_names`."""
         return list(self._groups[k])

@@ -82,7 +82,7 @@ def stage(name: str, what: str = "") -> Iterator[Stage]:
     logger.info(f"{name} done in {s.elapsed:.1f} s" + (f": {s.result}" if s.result else ""))
 
 
-def _flight_info(problem) -> dict:
+def flight_info(problem) -> dict:
     """Per flight: its recordings (marker samples and points; inertial rows) and their time span."""
     out = {}
     for k, f in enumerate(problem.flights):
@@ -124,7 +124,7 @@ def run_key(cfg: RunConfig, problem) -> dict:
     dict
         JSON-serialisable; two runs may share chain files only when their keys are equal.
     """
-    flights = {name: {k: v for k, v in f.items() if k != "file"} for name, f in _flight_info(problem).items()}
+    flights = {name: {k: v for k, v in f.items() if k != "file"} for name, f in flight_info(problem).items()}
     settings = {k: v for k, v in asdict(cfg.sampler).items() if k not in RESUMABLE_SETTINGS}
     settings["walkers"] = n_walkers(cfg.sampler, problem.dim)
     return json.loads(json.dumps({"parameters": list(problem.names), "flights": flights,
@@ -340,7 +340,7 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
         chains = run_sampler(problem, proposal, cfg.sampler, out, resume=steps is not None, progress=progress)
         st.result = f"{chains.reason} at step {chains.total_steps}"
     with stage("outputs", "summary.json, posterior.nc, run_info.json"):
-        info = {"name": cfg.name, "config": str(cfg.path), "flights": _flight_info(problem),
+        info = {"name": cfg.name, "config": str(cfg.path), "flights": flight_info(problem),
                 "sampler_settings": asdict(cfg.sampler), "markers": cfg.markers}
         if throws:
             info["inertial_throws"] = {t.name: t.to_dict() for t in throws}

@@ -218,15 +218,23 @@ def estimated_text(ctx) -> str:
     flights = s["flights"]
     n_points = sum(int(f.get("points", 0)) for f in flights.values())
     n_samples = sum(int(f.get("samples", 0)) for f in flights.values())
+    n_inertial = sum(int(f.get("inertial_values", 0)) for f in flights.values())
+    data = []
+    if n_points:
+        data.append(f"{n_samples} time samples, <b>{n_points} marker points</b>")
+    if n_inertial:
+        data.append(f"<b>{n_inertial} gyro and accelerometer values</b> of an inertial logger")
     coefs = ctx.coefficients
     extra = [c for c in coefs if c not in DEFAULT_TEN]
     what = f"the {len(coefs) - len(extra)} aerodynamic coefficients of the Hummel &amp; Hubbard (2002) model"
     if extra:
         what += " plus " + ", ".join(esc(e) for e in extra)
     n_f = len(flights)
-    return (f"<p class=lead>Estimated: {what}, with each flight's initial state and marker noise, from "
-            f"<b>{n_f} flight{'s' if n_f != 1 else ''}</b> ({esc(', '.join(flights))}): {n_samples} time samples, "
-            f"<b>{n_points} marker points</b>. Prior: {esc(s['prior']['name'])}.</p>")
+    noise = "marker noise" if not n_inertial else ("sensor noise and logger parameters" if not n_points
+                                                  else "marker and sensor noise and logger parameters")
+    return (f"<p class=lead>Estimated: {what}, with each flight's initial state and {noise}, from "
+            f"<b>{n_f} flight{'s' if n_f != 1 else ''}</b> ({esc(', '.join(flights))}): {'; '.join(data)}. "
+            f"Prior: {esc(s['prior']['name'])}.</p>")
 
 
 DEFAULT_TEN = ("CL0", "CLa", "CD0", "CDa", "CM0", "CMa", "CMq", "CRr", "CRp", "CNr")

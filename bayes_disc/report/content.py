@@ -61,10 +61,15 @@ def flights_table(ctx) -> str:
     rows = []
     for k, (name, f) in enumerate(ctx.summary["flights"].items()):
         kk = ctx.kinematics[k]
-        rows.append((name, Path(str(f.get("file", ""))).name, f.get("samples"), f.get("points"),
-                     f"{fmt(f.get('t_start'))} … {fmt(f.get('t_end'))}", _range(kk["alpha_ref"], 1, 180 / np.pi),
-                     _range(kk["speed"], 1), _range(kk["spin"], 0)))
-    return table(["flight", "file", "samples", "marker points", "t [s]", "α [deg]", "speed [m/s]",
+        data = []
+        if "points" in f:
+            data.append(f"{f['points']} marker points ({f['samples']} samples)")
+        if "inertial_values" in f:
+            data.append(f"{f['inertial_values']} inertial values ({f['inertial_rows']} rows)")
+        rows.append((name, Path(str(f.get("file", ""))).name, "; ".join(data),
+                     f"{fmt(float(kk['times'][0]))} … {fmt(float(kk['times'][-1]))}",
+                     _range(kk["alpha_ref"], 1, 180 / np.pi), _range(kk["speed"], 1), _range(kk["spin"], 0)))
+    return table(["flight", "file", "data", "t [s] (simulated)", "α [deg]", "air speed [m/s]",
                   "spin ω·b3 [rad/s]"], rows, "num")
 
 
@@ -275,7 +280,9 @@ def convergence_section(ctx) -> Section:
                    html, figs)
 
 
-def residual_section(ctx) -> Section:
+def residual_section(ctx) -> Section | None:
+    if not ctx.marker_flights:
+        return None
     sims = ctx.flight_sims
     fig = _figure(ctx, F.residual_figure(sims), "residuals",
                   "Measured − predicted marker coordinates for the highest-posterior draw, per flight (columns), "
@@ -294,9 +301,11 @@ def residual_section(ctx) -> Section:
                    "slow trends or oscillations point at missing physics or a bad start.", html, [fig])
 
 
-def flight_section(ctx) -> Section:
+def flight_section(ctx) -> Section | None:
+    if not ctx.marker_flights:
+        return None
     sims = ctx.flight_sims
-    kin = ctx.kinematics
+    kin = [ctx.kinematics[k] for k in ctx.marker_flights]
     f_alpha = _figure(ctx, F.alpha_figure(sims, [k["alpha_ref"] for k in kin], [k["alpha_draws"] for k in kin]),
                       "angle_of_attack", "Angle of attack against time per flight: highest-posterior draw and the "
                       "90 % band of posterior draws (cf. Hummel & Hubbard 2002 Fig. 3); lower row: the band "

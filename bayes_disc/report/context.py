@@ -171,9 +171,9 @@ class ReportContext:
             problem = build_problem(self.config)
         except (ConfigError, MarkerFileError) as e:
             raise ReportInputError(self.run.config_path, f"cannot rebuild the run's data: {e}") from None
-        recorded = self.summary["flights"]
-        now = {f.name: (int(f.times.size), int(f.n_points)) for f in problem.flights}
-        then = {k: (int(v.get("samples", -1)), int(v.get("points", -1))) for k, v in recorded.items()}
+        from ..inference.run import flight_info
+        strip = lambda d: {k: {a: b for a, b in v.items() if a != "file"} for k, v in d.items()}  # noqa: E731
+        now, then = strip(flight_info(problem)), strip(self.summary["flights"])
         if now != then:
             changed = sorted(set(now) ^ set(then)) or sorted(k for k in now if now[k] != then[k])
             raise ReportInputError(self.run.config_path, f"flight data differ from the run's summary.json "
@@ -243,7 +243,7 @@ class ReportContext:
 
     @cached_property
     def _sigma_sel(self) -> np.ndarray:
-        """(1 + B, n_flights) noise scales σ [m] of the reference and band draws."""
+        """(1 + B, n_groups) noise scales of the reference and band draws (units of each group's data)."""
         from ..inference.results import posterior_draws
         idx = np.r_[self.ref_index, self.band_indices]
         post = self.run.idata.posterior
@@ -287,13 +287,30 @@ class ReportContext:
         return self.problem.simulate(theta, k, want_states=True)
 
     @cached_property
+    def _trajectories(self) -> list:
+        """Per flight, the Trajectories of the reference and band draws (flight k on its first channel's grid)."""
+        return [self.simulate(self._theta_sel, k) for k in range(self.problem.n_flights)]
+
+    @property
+    def marker_flights(self) -> list[int]:
+        """Indices of the flights recorded by markers (the marker figures and tables are about these)."""
+        from ..observation.models import MarkerPositions
+        return [k for k, ch in enumerate(self.problem.channels) if isinstance(ch[0], MarkerPositions)]
+
+    @property
+    def inertial_flights(self) -> list[int]:
+        """Indices of the flights recorded by an inertial logger."""
+        from ..observation.models.inertial import InertialMeasurements
+        return [k for k, ch in enumerate(self.problem.channels) if any(isinstance(c, InertialMeasurements) for c in ch)]
+
+    @cached_property
     def flight_sims(self) -> list[FlightSim]:
+        """The marker flights' simulations (reference and band draws)."""
         p = self.problem
-        batch = self._theta_sel
         out = []
-        for k, f in enumerate(p.flights):
-            tr = self.simulate(batch, k)
-            sig = self._sigma_sel[:, k]
+        for k in self.marker_flights:
+            f, tr = p.flights[k], self._trajectories[k]
+            sig = self._sigma_sel[:, p.sigma_names.index(f"sigma_{f.name}")]
             out.append(FlightSim(name=f.name, times=f.times, measured=f.positions, marker_ids=tuple(f.marker_ids),
                                  ref_markers=tr.markers[0], ref_states=tr.states[0], draw_markers=tr.markers[1:],
                                  draw_states=tr.states[1:], sigma=sig[1:],
@@ -302,14 +319,14 @@ class ReportContext:
 
     @cached_property
     def kinematics(self) -> list[dict]:
-        """Per flight: α of the reference draw (n,) and of the band draws (B, n) [rad], air speed (n,) [m/s]
-        and spin ω·b3 (n,) [rad/s] of the reference draw."""
+        """Per flight (every flight): α of the reference draw (n,) and of the band draws (B, n) [rad], air speed
+        (n,) [m/s] and spin ω·b3 (n,) [rad/s] of the reference draw, and the times (n,) [s]."""
         out = []
-        for k, s in enumerate(self.flight_sims):
-            ref = self.problem.conditions(s.ref_states, self.theta_ref, k)
-            draws = self.problem.conditions(s.draw_states, self.theta_draws, k)
+        for k, tr in enumerate(self._trajectories):
+            ref = self.problem.conditions(tr.states[0], self.theta_ref, k)
+            draws = self.problem.conditions(tr.states[1:], self.theta_draws, k)
             out.append({"alpha_ref": ref.alpha[0], "alpha_draws": draws.alpha, "speed": ref.speed[0],
-                        "spin": s.ref_states[:, 12]})
+                        "spin": tr.states[0, :, 12], "times": tr.times})
         return out
 
     @cached_property
