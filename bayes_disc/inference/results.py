@@ -571,8 +571,10 @@ def format_table(summary: dict) -> str:
         p = summary["parameters"][n]
         pc = lit["potts_crowther"].get(n)
         hh = lit["hummel2002"].get(n)
-        scale = 1e3 if n.startswith("sigma_") else 1.0
-        label = n + (" [mm]" if scale != 1 else "")
+        inertial = n.startswith(("sigma_gyro_", "sigma_acc_"))
+        scale = 1e3 if n.startswith("sigma_") and not inertial else 1.0
+        label = n + (" [mm]" if scale != 1 else " [rad/s]" if n.startswith("sigma_gyro_") else
+                     " [m/s²]" if inertial else "")
         rows.append(f"{label:<16}{p['q50'] * scale:>11.4g}{p['q05'] * scale:>11.4g}{p['q95'] * scale:>11.4g}"
                     f"{p['r_hat']:>8.3f}{p['ess_bulk']:>8.0f}"
                     f"{'' if pc is None else format(pc, '.4g'):>10}{'' if hh is None else format(hh, '.4g'):>10}")

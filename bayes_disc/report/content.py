@@ -5,6 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..inference.layout import IC_NAMES as IC_ORDER
 from ..inference.versions import software_versions
 from . import figures as F
 from .answer import LIT_LABELS, compare
@@ -145,30 +146,36 @@ def coefficient_table(ctx) -> Section:
         row += [fmt(q["r_hat"]), fmt_count(q["ess_bulk"]), fmt_count(q.get("ess_tail"))]
         rows.append(row)
     coef_html = table(heads, rows, "num")
-    # per-flight σ and initial conditions
-    from ..inference.model import IC_NAMES
+    # per-flight quantities: noise scales, initial conditions, the flight's own observation-model parameters
+    from ..inference.results import flight_entries
     flights = ctx.flight_names
-    frows = []
-    sig_row = ["σ [mm]"]
-    for f in flights:
-        q = p[f"sigma_{f}"]
-        t = ctx.truth_sigma(f)
-        cell = f"{q['q50'] * 1e3:.3g} ({q['q05'] * 1e3:.3g} … {q['q95'] * 1e3:.3g})"
-        if t is not None:
-            cell += f"<br><span class=truth>truth {t * 1e3:.3g}</span>"
-        sig_row.append(Raw(cell))
-    frows.append(sig_row)
-    truths = {f: ctx.truth_initial(k) for k, f in enumerate(flights)}
+    problem = ctx.problem
+    where = {}
+    for var, k, kind, i in flight_entries(problem):
+        unit = problem.layout.units[i] if kind == "theta" else problem.noise_units[i]
+        where.setdefault((var, unit), {})[k] = kind
+    truths = {f: ctx.truth_initial(k) if k in ctx.marker_flights else None for k, f in enumerate(flights)}
     scales = {f: (None if t is None else _ic_scales(t)) for f, t in truths.items()}
-    for j, ic in enumerate(IC_NAMES):
-        row = [IC_LABELS[ic]]
-        for f in flights:
-            q = p[f"{ic}_{f}"]
-            cell = f"{fmt(q['q50'])} ({fmt(q['q05'])} … {fmt(q['q95'])})"
-            t = truths[f]
-            if t is not None:
+    frows = []
+    for (var, unit), per in sorted(where.items(), key=lambda kv: (kv[0][0] not in ("sigma",) and
+                                                                  not kv[0][0].startswith("sigma"))):
+        mm = unit == "m" and var == "sigma"
+        label = ("σ [mm]" if mm else IC_LABELS.get(var, f"{var} [{unit}]"))
+        row = [label]
+        for k, f in enumerate(flights):
+            if k not in per:
+                row.append("–")
+                continue
+            q = p[f"{var}_{f}"]
+            sc = 1e3 if mm else 1.0
+            cell = f"{fmt(q['q50'] * sc, 3 if mm else 4)} ({fmt(q['q05'] * sc, 3 if mm else 4)} … " \
+                   f"{fmt(q['q95'] * sc, 3 if mm else 4)})"
+            if var == "sigma" and ctx.truth_sigma(f) is not None:
+                cell += f"<br><span class=truth>truth {ctx.truth_sigma(f) * 1e3:.3g}</span>"
+            elif truths[f] is not None and var in IC_ORDER:
+                j = IC_ORDER.index(var)
                 cell += (f"<br><span class=truth>truth "
-                         f"{compare(float(t[j]), q['q05'], q['q95'], scales[f][j]).html}</span>")
+                         f"{compare(float(truths[f][j]), q['q05'], q['q95'], scales[f][j]).html}</span>")
             row.append(Raw(cell))
         frows.append(row)
     flight_html = table(["parameter"] + flights, frows, "num")
@@ -294,7 +301,7 @@ def residual_section(ctx) -> Section | None:
         r = s.residuals * 1e3
         per_axis = [float(np.sqrt(np.nanmean(r[..., a] ** 2))) for a in range(3)]
         rows.append([s.name, f"{s.rms * 1e3:.2f}"] + [f"{v:.2f}" for v in per_axis]
-                    + [f"{p[f'sigma_{s.name}']['q50'] * 1e3:.2f}"])
+                    + [f"{p[f'sigma_{s.name}']['q50'] * 1e3:.2f}"])   # marker flights only
     html = table(["flight", "RMS [mm]", "x", "y", "z", "posterior σ median [mm]"], rows, "num")
     return Section("residuals", "Residuals",
                    "Residuals should look like white noise around zero with an RMS close to the fitted σ; "
