@@ -85,6 +85,7 @@ def run_identifiability(cfg: RunConfig, profiles: bool = False, design: bool = T
     names = problem.names[:nc]
     ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
                            seed=cfg.sampler.seed)
+    (out / "least_squares.json").write_text(json.dumps(ls.to_dict(), indent=1))   # the optimum (predict --from)
     units = _noise_units(problem)
     noise = {n: {"value": float(s), "unit": u} for n, s, u in zip(problem.sigma_names, ls.sigma, units)}
     marker_rms = {n[len("sigma_"):]: v["value"] * 1e3 for n, v in noise.items() if v["unit"] == "m"}

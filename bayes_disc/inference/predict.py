@@ -3,7 +3,8 @@
 Every flight of the configuration is fitted twice by least squares:
 
 * **fixed** — the coefficients, extra-term parameters and the observation models' shared parameters (e.g.
-  the logger's position and filter constant) held at the posterior medians of ``RUN_DIR``; only the
+  the logger's position and filter constant) held at the posterior medians of ``RUN_DIR`` (or, for a folder
+  without a posterior such as an ``identifiability`` run's, at its least-squares optimum); only the
   flight's own initial conditions and nuisance parameters (row period, biases, filter state) free;
 * **free** — everything free (the flights of this configuration alone).
 
@@ -98,9 +99,16 @@ def run_predict(cfg: RunConfig, run_dir, output=None) -> dict:
     t0 = time.perf_counter()
     run_dir = Path(run_dir)
     summary_path = run_dir / "summary.json"
-    if not summary_path.is_file():
-        raise ConfigError(summary_path, None, "not found: --from must be the output folder of a sample run")
-    params = json.loads(summary_path.read_text())["parameters"]
+    if summary_path.is_file():
+        params = {n: v["q50"] for n, v in json.loads(summary_path.read_text())["parameters"].items()}
+        source = f"posterior medians of {run_dir}"
+    elif (run_dir / "least_squares.json").is_file():       # identifiability (or an interrupted sample) run
+        summary_path = run_dir / "least_squares.json"
+        params = {n: v["value"] for n, v in json.loads(summary_path.read_text())["parameters"].items()}
+        source = f"least-squares optimum of {run_dir} (no posterior there)"
+    else:
+        raise ConfigError(summary_path, None, "not found: --from must be the output folder of a sample (or "
+                          "identifiability) run")
     throws = load_run_throws(cfg) if cfg.imu else []
     problem = build_problem(cfg, throws=throws)
     theta = problem.start_vector()
@@ -108,8 +116,8 @@ def run_predict(cfg: RunConfig, run_dir, output=None) -> dict:
         if name not in params:
             raise ConfigError(summary_path, None, f"the run has no parameter {name!r} (its model differs from "
                               "this configuration's: physics terms and observation models must match)")
-        theta[i] = params[name]["q50"]
-    log.info("predict: %d flight(s), coefficients and shared parameters from %s", problem.n_flights, run_dir)
+        theta[i] = params[name]
+    log.info("predict: %d flight(s), coefficients and shared parameters: %s", problem.n_flights, source)
     free = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
                              seed=cfg.sampler.seed)
     flights = {}
@@ -125,8 +133,8 @@ def run_predict(cfg: RunConfig, run_dir, output=None) -> dict:
         if t.status != "ok":
             flights[t.name] = {"status": t.status, "reason": t.reason, "channels": {}}
             log.info("%s: %s — %s", t.name, t.status, t.reason)
-    result = {"flights": flights, "from": str(run_dir), "config": str(cfg.path),
-              "fixed_parameters": {n: params[n]["q50"] for n in problem.names[: problem.ic_start]},
+    result = {"flights": flights, "from": str(run_dir), "source": source, "config": str(cfg.path),
+              "fixed_parameters": {n: params[n] for n in problem.names[: problem.ic_start]},
               "marker_flights": [f.name for k, f in enumerate(problem.flights)
                                  if any(isinstance(c, MarkerPositions) for c in problem.channels[k])],
               "wall_time_s": time.perf_counter() - t0}
