@@ -496,7 +496,8 @@ def sample(config, *, output=None, progress: bool = True, resume: bool = False, 
     """
     from . import pipeline
     cfg = run_config(config, output=output, base_dir=base_dir)
-    outcome = pipeline.sample(cfg, resume=resume, progress=progress, report=report)
+    outcome = pipeline.sample(cfg, resume=resume, progress=progress, report=report,
+                              reports_dir=pipeline.reports_dir(output))
     return SampleResult(output=Path(cfg.output), raw=outcome.result)
 
 
@@ -556,7 +557,8 @@ def diagnose(config, *, output=None, sample: bool = True, processes: int = 2, pr
     """
     from . import pipeline
     cfg = run_config(config, output=output, base_dir=base_dir)
-    outcome = pipeline.diagnose(cfg, sample=sample, processes=processes, progress=progress, report=report)
+    outcome = pipeline.diagnose(cfg, sample=sample, processes=processes, progress=progress, report=report,
+                                reports_dir=pipeline.reports_dir(output))
     return DiagnosisResult(output=Path(cfg.output), raw=outcome.result)
 
 
