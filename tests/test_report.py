@@ -5,7 +5,6 @@ import io
 import json
 import shutil
 import subprocess
-import time
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -98,16 +97,13 @@ def tiny(tmp_path_factory):
         mp.chdir(d)  # `sample` may write reports/<name>.html in the working directory
         assert main(["sample", str(d / "config.yaml"), "--no-progress"]) == 0
     run_dir = d / "out"
-    t0 = time.perf_counter()
     html_path = build_report(run_dir, reports_dir=d / "reports")
-    elapsed = time.perf_counter() - t0
-    return {"dir": d, "run": run_dir, "html": html_path, "text": html_path.read_text(encoding="utf-8"),
-            "seconds": elapsed}
+    return {"dir": d, "run": run_dir, "html": html_path, "text": html_path.read_text(encoding="utf-8")}
 
 
-def test_report_written_where_expected_and_fast(tiny):
+def test_report_written_where_expected(tiny):
+    """(How long a report takes is a benchmark's question, not a unit test's.)"""
     assert tiny["html"] == tiny["dir"] / "reports" / "tiny.html"
-    assert tiny["seconds"] < 30.0, tiny["seconds"]
 
 
 #: sections of a run without diagnosis.json (the missing-physics section is left out, not a placeholder)
