@@ -1,12 +1,10 @@
 """Awkward but common input: each gets a message that names the real cause, or is accepted as it should be."""
-import time
-
 import numpy as np
 import pytest
 
 from bayes_disc.cli import main
 from bayes_disc.observation.config_io import ConfigError, load_yaml
-from bayes_disc.observation.markers import MarkerFileError, flights_from_table, read_marker_csv
+from bayes_disc.observation.markers import MarkerFileError, read_marker_csv
 
 IDS = ("0", "1", "2")
 GOOD = """flight,t,marker,x,y,z
@@ -93,31 +91,3 @@ def test_config_with_bom_and_crlf_reads_and_latin1_config_is_named(tmp_path):
     q = _bytes(tmp_path, "name: démo\n".encode("latin-1"), "d.yaml")
     with pytest.raises(ConfigError, match=r"line 1: not a UTF-8 text file \(byte 0xe9\)"):
         load_yaml(q)
-
-
-def _big_table_text(flights: int, rows: int) -> str:
-    samples = rows // (3 * flights)
-    lines = ["flight,t,marker,x,y,z"]
-    for f in range(flights):
-        for i in range(samples):
-            for m, (dx, dy) in enumerate(((0.1, 0.0), (-0.03, 0.08), (-0.07, -0.08))):
-                lines.append(f"f{f},{i / 120:.6f},{m},{dx + 0.1 * i:.4f},{dy:.4f},{1 + 0.01 * m:.4f}")
-    return "\n".join(lines) + "\n"
-
-
-def test_validation_cost_does_not_grow_with_the_number_of_flights(tmp_path):
-    """Same rows in 2 or in 1,000 flights: reading, validating and arranging take about the same time
-    (once O(rows × flights): 1e6 rows took 284 s in 3,000 flights, 11 s in 4)."""
-    rows = 60_000
-    times = {}
-    for flights in (2, 1000):
-        p = _bytes(tmp_path, _big_table_text(flights, rows).encode(), f"big{flights}.csv")
-        best = np.inf
-        for _ in range(2):
-            t0 = time.perf_counter()
-            table = read_marker_csv(p, IDS)
-            flights_from_table(table, IDS)
-            best = min(best, time.perf_counter() - t0)
-        assert len(table.flights) == flights
-        times[flights] = best
-    assert times[1000] < 3.0 * times[2] + 0.2, times
