@@ -81,13 +81,14 @@ def fit_at(p: Problem, theta: np.ndarray, sigma: np.ndarray, ids=()) -> ModelFit
 def _settle_filter(p: Problem, theta: np.ndarray) -> np.ndarray:
     """The synthesizer starts the filter settled (y0 = its input at release): set lpf_state to it."""
     from bayes_disc.diagnostics.residuals import channel_runs
-    from bayes_disc.observation.models.inertial import sensor_rotation, specific_force_body
+    from bayes_disc.observation.models.inertial import sensor_rotation, sensor_signals
     theta = theta.copy()
     for k, ls in enumerate(LAUNCHES):
         (c, tr, extra, _, _), = channel_runs(p, theta, k)
         par = c.split(extra)
-        _, f = specific_force_body(tr.states, c.h, c.g, par["r_s"])
-        y0 = sensor_rotation(par["tilt"])[0] @ f[0, 0]
+        x = sensor_signals(np.ascontiguousarray(tr.states), c.h, c.g, np.ascontiguousarray(par["r_s"]),
+                           np.ascontiguousarray(sensor_rotation(par["tilt"])))
+        y0 = x[0, 0, 3:]                                   # C f_B at release: the settled filter's state
         for a, v in zip("xyz", y0):
             theta[p.layout.index(f"lpf_state_{a}_{ls.name}")] = v
     return theta

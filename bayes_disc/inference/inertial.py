@@ -80,8 +80,13 @@ def load_run_throws(cfg) -> list[InertialThrow]:
                 raise ImuFileError(src.file, None, "no throw found (|gyro| never exceeds the spin threshold); "
                                    "give the rows with imu[..].throws")
             for seg, sub in zip(segments, throw_logs(rec, segments)):
-                tb = estimate_timebase(rec, seg.start + 5, seg.end, name=seg.name) if rec.mag is not None else None
-                status, reason = "ok", seg.reason
+                status, reason, tb = "ok", seg.reason, None
+                if rec.mag is not None:
+                    try:
+                        tb = estimate_timebase(rec, seg.start + 5, seg.end, name=seg.name)
+                    except ValueError as e:     # e.g. a throw too short for the barometer cadence
+                        reason += f"; no independent row-period estimate ({e})"
+                        log.warning("%s: no independent row-period estimate: %s", seg.name, e)
                 if seg.orientation == "upside_down":
                     status = "out_of_model"
                     reason = ("flown upside down (accelerometer z shows the lift along +b3): the flight model is "
