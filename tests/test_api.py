@@ -63,7 +63,8 @@ def test_sample_from_dataframe_then_load_gives_the_same_summary(tmp_path, monkey
     # the report was built once, and said so once
     html_lines = [r.getMessage() for r in caplog.records if ".html" in r.getMessage()]
     assert len(html_lines) == 1 and "rt.html" in html_lines[0], html_lines
-    assert (tmp_path / "reports/rt.html").is_file()
+    assert (tmp_path / "out" / "reports" / "rt.html").is_file()       # with the run, as `--output` does
+    assert not (tmp_path / "reports").exists()
     # the in-memory flights were persisted and read back as the same observations
     cfg_path = tmp_path / "out/input/config.yaml"
     assert json.loads((tmp_path / "out/summary.json").read_text())["config"] == str(cfg_path)

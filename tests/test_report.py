@@ -106,8 +106,9 @@ def test_report_written_where_expected(tiny):
     assert tiny["html"] == tiny["dir"] / "reports" / "tiny.html"
 
 
-#: sections of a run without diagnosis.json (the missing-physics section is left out, not a placeholder)
-TINY_SECTIONS = [i for i in DEFAULT_SECTION_IDS if i != "missing-physics"]
+#: sections of a marker run without diagnosis.json (the missing-physics section is left out, not a
+#: placeholder; the inertial section only appears with inertial data)
+TINY_SECTIONS = [i for i in DEFAULT_SECTION_IDS if i not in ("missing-physics", "inertial")]
 
 
 def test_html_parses_with_every_section_and_guide(tiny):

@@ -41,8 +41,6 @@ CHANNELS = {"markers": ("m", ("sigma",)), "gyro": ("rad/s", ("sigma_gyro_axial",
 def channel_rms(problem, theta: np.ndarray, k: int) -> dict:
     """{channel: RMS} of flight k's residuals at θ (dim,), channels of :data:`CHANNELS`."""
     r, ok = problem.residuals(theta[None], k)
-    if not ok[0]:
-        return {c: float("nan") for c in CHANNELS}
     groups = problem.residual_groups(k)
     name = problem.flights[k].name
     out = {}
@@ -50,7 +48,7 @@ def channel_rms(problem, theta: np.ndarray, k: int) -> dict:
         ids = [problem.sigma_names.index(f"{p}_{name}") for p in prefixes if f"{p}_{name}" in problem.sigma_names]
         if ids:
             sel = np.isin(groups, ids)
-            out[ch] = float(np.sqrt(np.mean(r[0, sel] ** 2)))
+            out[ch] = float(np.sqrt(np.mean(r[0, sel] ** 2))) if ok[0] else float("nan")
     return out
 
 
