@@ -158,3 +158,16 @@ def test_diagnose_inertial_throws(cy, expected):
         assert not any(d.unexplained.values())
         for f, per in d.final.rms.items():
             assert abs(per["acc"]["rms"] / SPEC.acc_noise[0] - 1) < 0.2, (f, per)
+
+
+def test_inertial_problem_survives_pickling_into_worker_processes():
+    """Candidate fits run in worker processes (the Problem is pickled): an inertial throw must keep its
+    inertial initial conditions there (regression: the kind was tested by identity and was lost)."""
+    import pickle
+    logs = throws(0.0, seed=4)
+    p = builder(logs, starts=[ls.initial_state() for ls in LAUNCHES])(())
+    q = pickle.loads(pickle.dumps(p))
+    theta = p.start_vector()[None]
+    r, ok = p.residuals(theta, 0)
+    r2, ok2 = q.residuals(theta, 0)
+    assert ok[0] and ok2[0] and np.array_equal(r, r2)

@@ -254,7 +254,7 @@ class Problem:
     def ic_to_state(self, ic: np.ndarray, k: int) -> np.ndarray:
         """(B, n_ic) initial-condition parameters of flight k → (B, 13) states (:mod:`.layout`)."""
         ic = np.atleast_2d(ic)
-        if self.layout.flight_ic[k] is INERTIAL_IC:
+        if self.layout.flight_ic[k] == INERTIAL_IC:          # equality: survives pickling (worker processes)
             tilt = np.concatenate([ic[:, 0:2], np.zeros((ic.shape[0], 1))], axis=1)
             R = quat_to_matrix(quat_from_rotvec(tilt)) @ R_LEVEL
             v = np.einsum("bij,bj->bi", R, ic[:, 2:5])
@@ -266,7 +266,7 @@ class Problem:
     def state_to_ic(self, state: np.ndarray, k: int) -> np.ndarray:
         """(13,) state of flight k → its initial-condition parameters (for ``inertial`` flights the state
         is first turned about the vertical so that R = exp([tilt1, tilt2, 0]×) R_level)."""
-        if self.layout.flight_ic[k] is INERTIAL_IC:
+        if self.layout.flight_ic[k] == INERTIAL_IC:          # equality: survives pickling (worker processes)
             R = quat_to_matrix(state[6:10])
             M = R @ R_LEVEL.T
             psi = np.arctan2(M[1, 0] - M[0, 1], M[0, 0] + M[1, 1])
