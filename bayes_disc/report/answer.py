@@ -272,7 +272,7 @@ def answer_section(ctx) -> Section:
     conv = convergence_verdict(ctx.summary["convergence"], ctx.summary.get("sampler_settings"))
     ident = identifiability_verdict(ctx.run.extras.get("identifiability"), ctx.coefficients, ctx.run.config_path)
     diag = ctx.run.extras.get("diagnosis")
-    coverage = None if diag else ctx.predictive_coverage
+    coverage = None if diag or not ctx.marker_flights else ctx.predictive_coverage   # markers' predictive check
     adequacy = adequacy_verdict(diag, ctx.run.config_path, coverage)
     verdicts = '<ul class="verdicts">' + "".join(render_verdict(v) for v in (conv, ident, adequacy)) + "</ul>"
     lit_note = ("<p class=note><i>in</i> / <i>out</i>: the published (or true) value lies inside / outside the "
