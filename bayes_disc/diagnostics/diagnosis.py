@@ -276,6 +276,7 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
     logger.info(f"ranking {len(candidates)} candidates by ΔBIC (each a least-squares refit):")
     diag = diagnose(base, build, processes=processes, max_nfev=cfg.least_squares.max_nfev,
                     candidates=candidates, log=logger.info)
+    base = diag.base                      # the base model's best optimum (it may have been refitted)
     final = diag.final
     result = {"verdict": diag.verdict, "effects": [], "rms_before_mm": base.rms_mm, "rms_after_mm": final.rms_mm,
               "rms_before": base.rms, "rms_after": final.rms, "skipped_candidates": skipped}

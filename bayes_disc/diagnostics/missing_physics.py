@@ -21,7 +21,14 @@ and three attitude angles; inertial: gyro and accelerometer along the sensor axe
 white by Ljung–Box at a Bonferroni-corrected level.
 When no single candidate does, the strongest is combined with each of the others (at most two terms);
 structure that no candidate removes is reported as unexplained, with its flight, series and the time
-window where it is strongest. The data explanations of marker recordings (``marker_geometry``,
+window where it is strongest.
+
+A candidate's fit starts from more places than the base fit did (:func:`candidate_starts`), so part of
+its gain can be a better optimum rather than better physics (inertial throws, with their many nuisance
+parameters, show it on data with nothing missing). Before candidates are judged, the base model is
+therefore refitted from the strongest candidate's optimum with the candidate switched off; if that
+improves the base (Σ_g n_g ln S_g lower by more than ``BASE_REFIT_MIN``), it becomes the base and the
+candidates are fitted again (at most ``BASE_REFITS`` times). The data explanations of marker recordings (``marker_geometry``,
 ``time_offset``) are candidates only when some flight has markers.
 """
 from __future__ import annotations
@@ -50,6 +57,10 @@ STRUCTURE_ALPHA = 1e-3
 MAX_TERMS = 2
 #: candidates tried together with the strongest one when it alone leaves structure
 PAIR_PARTNERS = 3
+#: times the base model may be replaced by its refit from a candidate's optimum
+BASE_REFITS = 2
+#: least improvement of the base (Σ_g n_g ln S_g) that replaces it
+BASE_REFIT_MIN = 2.0
 
 
 def applicable_candidates(problem: Problem, candidates=CANDIDATES) -> tuple[list, dict]:
@@ -230,6 +241,41 @@ def fit_candidates(base: ModelFit, build, ids, processes: int = 1, max_nfev: int
     return {c: model_fit(p, ls, base.ids + (c,)) for (c, p), ls in zip(problems.items(), results)}
 
 
+def refit_base(base: ModelFit, fits: dict, max_nfev: int = 200, threshold: float = EVIDENCE_THRESHOLD,
+               minimum: float = BASE_REFIT_MIN) -> tuple[ModelFit, str, float] | None:
+    """The base model refitted from the strongest candidate's optimum (its extra parameters dropped).
+
+    Parameters
+    ----------
+    base : ModelFit
+    fits : dict
+        {candidate id: ModelFit} of the candidates.
+    max_nfev : int
+        Function evaluations of the refit.
+    threshold : float
+        Only a candidate with ΔBIC above it is used.
+    minimum : float
+        Least improvement Σ_g n_g ln(S_g,base / S_g,refit) that counts.
+
+    Returns
+    -------
+    (ModelFit, str, float) or None
+        The better base fit, the candidate it started from and the improvement; None if none.
+    """
+    scored = sorted(((evidence(base, f), c, f) for c, f in fits.items()), key=lambda t: -t[0])
+    if not scored or scored[0][0] <= threshold:
+        return None
+    _, cid, fit = scored[0]
+    p = base.problem
+    x0 = p.layout.transfer(fit.ls.theta, fit.problem.layout, base.ls.theta)
+    ls = refine_least_squares(p, x0, max_nfev=max_nfev)
+    ss = p.sum_squares(ls.theta[None])[0]
+    gain = float(np.sum(p.n_coords * np.log(base.ss / ss)))
+    if not np.isfinite(gain) or gain <= minimum:
+        return None
+    return model_fit(p, ls, base.ids), cid, gain
+
+
 @dataclass
 class Diagnosis:
     """The outcome: base and final fits, every candidate judged (per round), the accepted ids and the
@@ -252,10 +298,19 @@ def diagnose(base: ModelFit, build, processes: int = 1, max_nfev: int = 200, can
     current, accepted, rounds = base, [], []
     pending = None
     ids = [c for c in candidates if c not in base.ids]
-    for _ in range(MAX_TERMS):
+    for r in range(MAX_TERMS):
         if not ids:
             break
         fits = fit_candidates(current, build, ids, processes=processes, max_nfev=max_nfev)
+        for _ in range(BASE_REFITS if r == 0 else 0):
+            better = refit_base(current, fits, max_nfev=max_nfev, threshold=threshold)
+            if better is None:
+                break
+            current, cid, gain = better
+            base = current
+            log(f"  the base model refits to a better optimum from the {cid} fit (Σ n ln S lower by {gain:.1f}); "
+                "fitting the candidates again")
+            fits = fit_candidates(current, build, ids, processes=processes, max_nfev=max_nfev)
         ranked = sorted((judge(current, c, f, threshold) for c, f in fits.items()),
                         key=lambda c: c.delta_bic, reverse=True)
         rounds.append(ranked)
