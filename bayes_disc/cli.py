@@ -92,6 +92,9 @@ def _cmd_calibrate(args) -> int:
     from .calibration import load_cal_config, run_campaign
     cal = load_cal_config(args.config, output_override=args.output)
     result = run_campaign(cal, scheduler=args.scheduler, workers=args.workers, progress=not args.no_progress)
+    if result["replicates"] == 0:
+        logger.error(f"no replicate succeeded ({len(result['failed'])} failed; errors in {cal.output}/replicates/)")
+        return 3
     for name, c in result["coefficients"].items():
         logger.info(f"{name}: coverage 50 % {c['coverage_50']:.2f}, 90 % {c['coverage_90']:.2f}, "
                     f"rank uniformity p {c['rank_uniformity_p']:.3g}", extra=RESULT)
@@ -256,7 +259,7 @@ def main(argv=None) -> int:
     -------
     int
         Exit status: 0 success, 2 bad input (one line on stderr), 3 ``sample --strict`` without
-        convergence, 130 interrupted.
+        convergence or a ``calibrate`` campaign without a successful replicate, 130 interrupted.
     """
     args = build_parser().parse_args(argv)
     try:
