@@ -88,6 +88,19 @@ def _cmd_predict(args) -> int:
     return 0
 
 
+def _cmd_calibrate(args) -> int:
+    from .calibration import load_cal_config, run_campaign
+    cal = load_cal_config(args.config, output_override=args.output)
+    result = run_campaign(cal, scheduler=args.scheduler, workers=args.workers, progress=not args.no_progress)
+    if result["replicates"] == 0:
+        logger.error(f"no replicate succeeded ({len(result['failed'])} failed; errors in {cal.output}/replicates/)")
+        return 3
+    for name, c in result["coefficients"].items():
+        logger.info(f"{name}: coverage 50 % {c['coverage_50']:.2f}, 90 % {c['coverage_90']:.2f}, "
+                    f"rank uniformity p {c['rank_uniformity_p']:.3g}", extra=RESULT)
+    return 0
+
+
 def _verbosity_options(parser, default) -> None:
     """``-v/--verbose`` and ``-q/--quiet`` (repeatable); ``default`` SUPPRESS on subcommands so that a flag
     given before the subcommand is not reset by the subcommand's defaults."""
@@ -175,6 +188,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--from", dest="run_dir", required=True, help="output folder of a `bayes-disc sample` run")
     p.add_argument("--output", help="override the config's output folder")
     p.set_defaults(func=_cmd_predict)
+    p = sub.add_parser("calibrate", parents=[common],
+                       help="simulation-based calibration over many synthetic data sets, on Dask",
+                       description="Draws N truths, synthesises flights from a template, fits each (least squares "
+                                   "and the sampler) as a Dask task and ranks the truth among the posterior draws. "
+                                   "Writes replicates/*.json (one per finished replicate: an interrupted campaign "
+                                   "resumes), calibration.json and calibration.html in the output folder "
+                                   "(docs/calibration.md).")
+    p.add_argument("config", help="CAL.yaml (keys: docs/calibration.md)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="address of a running Dask scheduler (tcp://host:8786); default: a local cluster")
+    p.add_argument("--workers", type=_positive_int, default=2,
+                   help="worker processes of the local cluster (default 2; ignored with --scheduler)")
+    p.add_argument("--output", metavar="DIR", help="override the campaign's output folder")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar (finished replicates are logged)")
+    p.set_defaults(func=_cmd_calibrate)
     _register_optional(sub, common)
     return parser
 
@@ -231,7 +259,7 @@ def main(argv=None) -> int:
     -------
     int
         Exit status: 0 success, 2 bad input (one line on stderr), 3 ``sample --strict`` without
-        convergence, 130 interrupted.
+        convergence or a ``calibrate`` campaign without a successful replicate, 130 interrupted.
     """
     args = build_parser().parse_args(argv)
     try:

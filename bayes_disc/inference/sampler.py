@@ -101,6 +101,33 @@ def _init_worker(problem, proposal, independence, fraction):
     _WORKER.update(problem=problem, proposal=proposal, independence=independence, fraction=fraction)
 
 
+class _InProcessPool:
+    """The worker-pool interface run in this process, for ``processes: 1``: no child process, so that a
+    run can itself be a task of a daemonic worker (a Dask worker, which may not start children)."""
+
+    def __init__(self, initargs):
+        self.initargs = initargs
+
+    def __enter__(self):
+        _init_worker(*self.initargs)
+        return self
+
+    def __exit__(self, *exc):
+        _WORKER.clear()
+        return False
+
+    def map(self, fn, tasks):
+        return [fn(t) for t in tasks]
+
+
+def _pool(settings, initargs):
+    """Worker pool advancing the ensembles: ``min(processes, ensembles)`` processes, or this process alone."""
+    if settings.processes <= 1:
+        return _InProcessPool(initargs)
+    return mp_context().Pool(min(settings.processes, settings.ensembles), initializer=_init_worker,
+                             initargs=initargs)
+
+
 def _advance(task) -> int:
     path, n_steps, start, seed = task
     problem, proposal, independence = _WORKER["problem"], _WORKER["proposal"], _WORKER["independence"]
@@ -438,7 +465,6 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
 
     coef_idx = np.arange(problem.n_coef + problem.n_ext)
     adapt_at = [settings.adapt_steps * (i + 1) for i in range(ADAPTATIONS)]
-    ctx = mp_context()
     bar = _Bar(settings, progress)
     verdict = {"converged": False, "tau": np.full((1, problem.dim), np.nan)}
     checked, fraction = None, 0.0
@@ -446,8 +472,7 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
     finished = False
     try:
         while not finished:
-            with ctx.Pool(min(settings.processes, settings.ensembles), initializer=_init_worker,
-                          initargs=(problem, proposal, independence, settings.independence_fraction)) as pool:
+            with _pool(settings, (problem, proposal, independence, settings.independence_fraction)) as pool:
                 if min(steps) < done:   # resumed with unequal ensembles: bring the shorter ones level first
                     tasks = [(p, done - k, s, settings.seed * 1000 + e)
                              for e, (p, s, k) in enumerate(zip(paths, starts, steps)) if k < done]

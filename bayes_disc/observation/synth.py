@@ -40,6 +40,52 @@ from .markers import FlightObservation, table_from_flights, write_marker_csv
 from .imu.formats import InertialLog, write_flatball_ins, write_imu_csv
 from .inertial_synth import LoggerSpec, recorded_throw, synthetic_log
 
+#: kinds of data defect (``defects:`` keys)
+DEFECT_KINDS = ("outliers", "swaps", "ar1", "sigma_m")
+
+
+@dataclass(frozen=True)
+class Defects:
+    """Data defects of one synthetic flight (module docstring); the defaults are off.
+
+    Attributes
+    ----------
+    outlier_fraction : float
+        Fraction of the observed points made gross outliers.
+    outlier_size_m : tuple of float
+        (low, high) displacement of an outlier [m]; the size is uniform in it, the direction uniform on
+        the sphere.
+    swap_frames : int
+        Number of frames (sample times) in which two markers' labels are exchanged.
+    swap_fraction : float
+        Fraction of the frames with a swap (added to ``swap_frames``: ``round(fraction · n_frames)``).
+    ar1_rho : float
+        AR(1) coefficient ρ of the marker noise between consecutive samples (0: white noise).
+    sigma_fraction : float
+        Fraction of the flight's samples with ``sigma_factor`` × the noise.
+    sigma_factor : float
+        Noise multiplier k of those samples.
+    sigma_where : str
+        ``segment`` (one contiguous block of samples, all markers) or ``random`` (random points).
+    """
+
+    outlier_fraction: float = 0.0
+    outlier_size_m: tuple = (0.02, 0.06)
+    swap_frames: int = 0
+    swap_fraction: float = 0.0
+    ar1_rho: float = 0.0
+    sigma_fraction: float = 0.0
+    sigma_factor: float = 1.0
+    sigma_where: str = "segment"
+    per_point_sigma: bool = False   # write a sigma_m column (set when any sigma_m block is given)
+
+    @property
+    def any(self) -> bool:
+        """Whether the flight has any defect (or a sigma_m column)."""
+        return (self.outlier_fraction > 0 or self.swap_frames > 0 or self.swap_fraction > 0 or self.ar1_rho != 0
+                or self.per_point_sigma)
+
+
 DEFAULT_MARKERS = {"0": [0.100, 0.000, -0.015], "1": [-0.0308, 0.0846, -0.015], "2": [-0.0707, -0.0778, -0.015]}
 
 
@@ -62,6 +108,7 @@ class LaunchSpec:
     noise_mm: float = 2.0
     dropout: float = 0.0
     gust: tuple | None = None     # (t_start, t_end, w_x, w_y, w_z): extra wind [m/s] during [t_start, t_end) s
+    defects: Defects = Defects()  # data defects (off by default)
 
     def initial_state(self, wind=None) -> np.ndarray:
         """State (13,) at release: position, velocity, quaternion, body ω."""
@@ -202,6 +249,141 @@ def _recorded_markers(spec: SynthSpec, f: LaunchSpec, y0, times, mb, terms, ext,
     return out
 
 
+# ------------------------------------------------------------------------------------------- defects
+def ar1_noise(z: np.ndarray, rho: float) -> np.ndarray:
+    """Unit-variance AR(1) noise along the first axis from white standard normals.
+
+    e_0 = z_0, e_t = ρ e_{t−1} + √(1−ρ²) z_t: stationary from the first sample, Var e_t = 1,
+    Corr(e_t, e_{t+k}) = ρ^k.
+
+    Parameters
+    ----------
+    z : ndarray, shape (n, ...)
+        White N(0, 1) draws; axis 0 is time (one sample interval per step).
+    rho : float
+        AR(1) coefficient, |ρ| < 1 (0 returns ``z`` itself).
+
+    Returns
+    -------
+    ndarray, shape of ``z``
+    """
+    if rho == 0.0:
+        return z
+    e = np.empty_like(z)
+    e[0] = z[0]
+    c = np.sqrt(1.0 - rho * rho)
+    for t in range(1, z.shape[0]):
+        e[t] = rho * e[t - 1] + c * z[t]
+    return e
+
+
+def point_sigmas(n: int, n_markers: int, sigma: float, d: Defects, rng: np.random.Generator):
+    """Every point's noise sd: ``sigma`` [m], times ``d.sigma_factor`` on a fraction of the samples.
+
+    Parameters
+    ----------
+    n, n_markers : int
+        Samples and markers of the flight.
+    sigma : float
+        The flight's noise sd [m].
+    d : Defects
+        ``sigma_fraction`` of the samples (``segment``: one contiguous block of all markers, at a uniformly
+        random place; ``random``: random points) get ``sigma_factor`` × ``sigma``.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    sig : ndarray, shape (n, n_markers)
+        Point sds [m].
+    truth : dict
+        fraction, factor, where, and the points with the larger noise (``t_range_s`` index range for a
+        segment, ``n_points``).
+    """
+    sig = np.full((n, n_markers), sigma)
+    truth = {"fraction": d.sigma_fraction, "factor": d.sigma_factor, "where": d.sigma_where}
+    if d.sigma_fraction <= 0.0:
+        truth["n_points"] = 0
+        return sig, truth
+    if d.sigma_where == "segment":
+        m = int(round(d.sigma_fraction * n))
+        start = int(rng.integers(0, n - m + 1))
+        sig[start:start + m] *= d.sigma_factor
+        truth["samples"] = [start, start + m]
+        truth["n_points"] = m * n_markers
+    else:
+        hit = rng.random((n, n_markers)) < d.sigma_fraction
+        sig[hit] *= d.sigma_factor
+        truth["n_points"] = int(hit.sum())
+    return sig, truth
+
+
+def swap_labels(pos: np.ndarray, sig: np.ndarray | None, d: Defects, rng: np.random.Generator) -> list:
+    """Exchange two observed markers' labels in randomly chosen frames (in place).
+
+    Parameters
+    ----------
+    pos : ndarray, shape (n, n_markers, 3)
+        Recorded positions [m], NaN where missing; modified.
+    sig : ndarray, shape (n, n_markers), or None
+        Point sds [m], exchanged with the positions; modified.
+    d : Defects
+        ``swap_frames`` + round(``swap_fraction`` · n) frames, among those with ≥ 2 observed markers.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    list of (frame, marker a, marker b)
+        Indices of every swapped frame and its two markers, in time order.
+    """
+    observed = np.all(np.isfinite(pos), axis=-1)
+    eligible = np.flatnonzero(observed.sum(axis=1) >= 2)
+    want = d.swap_frames + int(round(d.swap_fraction * pos.shape[0]))
+    if want > eligible.size:
+        raise ValueError(f"{want} label swaps asked for but only {eligible.size} frames have two markers")
+    out = []
+    for i in np.sort(rng.choice(eligible, size=want, replace=False)):
+        a, b = np.sort(rng.choice(np.flatnonzero(observed[i]), size=2, replace=False))
+        pos[i, [a, b]] = pos[i, [b, a]]
+        if sig is not None:
+            sig[i, [a, b]] = sig[i, [b, a]]
+        out.append((int(i), int(a), int(b)))
+    return out
+
+
+def inject_outliers(pos: np.ndarray, d: Defects, rng: np.random.Generator) -> list:
+    """Displace a fraction of the observed points by a gross error (in place).
+
+    Each chosen point moves by s·u, s ~ U(``outlier_size_m``) [m], u uniform on the unit sphere.
+
+    Parameters
+    ----------
+    pos : ndarray, shape (n, n_markers, 3)
+        Recorded positions [m], NaN where missing; modified.
+    d : Defects
+        ``outlier_fraction`` of the observed points (rounded) become outliers.
+    rng : numpy.random.Generator
+
+    Returns
+    -------
+    list of (frame, marker, offset)
+        Index of each outlier's frame and marker and its displacement [m] (list of 3), in time order.
+    """
+    obs = np.argwhere(np.all(np.isfinite(pos), axis=-1))
+    m = int(round(d.outlier_fraction * len(obs)))
+    if m == 0:
+        return []
+    chosen = obs[np.sort(rng.choice(len(obs), size=m, replace=False))]
+    u = rng.normal(size=(m, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    size = rng.uniform(d.outlier_size_m[0], d.outlier_size_m[1], size=m)
+    out = []
+    for (i, k), uj, sj in zip(chosen, u, size):
+        off = uj * sj
+        pos[i, k] += off
+        out.append((int(i), int(k), off.tolist()))
+    return out
+
+
 @dataclass
 class SynthResult:
     """Synthetic data: marker flights, the truth, and the inertial logs (when the spec has a logger).
@@ -268,13 +450,25 @@ def _inertial_logs(spec: SynthSpec, rng: np.random.Generator, states0: dict) -> 
 
 
 def synthesize(spec: SynthSpec) -> SynthResult:
-    """Simulate every flight, add Gaussian marker noise and drop a random fraction of points."""
+    """Simulate every flight, add marker noise, drop a random fraction of points and add the defects.
+
+    Parameters
+    ----------
+    spec : SynthSpec
+        The data set.
+
+    Returns
+    -------
+    SynthResult
+        Flights (with per-point ``sigma`` [m] when any flight has a ``sigma_m`` defect) and the truth.
+    """
     rng = np.random.default_rng(spec.seed)
     ids = tuple(spec.markers)
     mb = np.array([spec.markers[i] for i in ids], float)
     terms, ext = spec.terms, spec.extension()
     flights, truth_flights, states0 = [], {}, {}
-    for f in spec.flights:
+    write_sigma = any(f.defects.per_point_sigma for f in spec.flights)
+    for index, f in enumerate(spec.flights):
         times = np.arange(int(round(f.duration * spec.sample_rate_hz)) + 1) / spec.sample_rate_hz
         y0 = f.initial_state(spec.wind())
         states0[f.name] = y0
@@ -282,17 +476,42 @@ def synthesize(spec: SynthSpec) -> SynthResult:
         states = tr.states[0]
         recorded = _recorded_markers(spec, f, y0, times, mb, terms, ext, tr.markers[0])
         sigma = f.noise_mm / 1000.0
-        pos = recorded + rng.normal(0.0, sigma, recorded.shape)
+        d = f.defects
+        drng = np.random.default_rng([spec.seed, 2, index])     # the defects' own stream
+        sig_pt, sigma_truth = None, None
+        if d.ar1_rho == 0.0 and not d.per_point_sigma:
+            pos = recorded + rng.normal(0.0, sigma, recorded.shape)
+        else:
+            # the same standard normals as white noise (so the dropout below is unchanged), made AR(1) and
+            # scaled by every point's sd
+            z = ar1_noise(rng.normal(0.0, 1.0, recorded.shape), d.ar1_rho)
+            sig_pt, sigma_truth = point_sigmas(times.size, len(ids), sigma, d, drng)
+            pos = recorded + sig_pt[..., None] * z
         drop = rng.random(pos.shape[:2]) < f.dropout
         pos[drop] = np.nan
-        flights.append(FlightObservation(name=f.name, source="synth", times=times, marker_ids=ids, positions=pos))
+        if sig_pt is None and write_sigma:
+            sig_pt = np.full(pos.shape[:2], sigma)
+        defects_truth = None
+        if d.any:
+            swaps = swap_labels(pos, sig_pt, d, drng)
+            outliers = inject_outliers(pos, d, drng)
+            defects_truth = {
+                "outliers": {"fraction": d.outlier_fraction, "size_m": list(d.outlier_size_m),
+                             "points": [{"t": float(times[i]), "marker": ids[k], "offset_m": off}
+                                        for i, k, off in outliers]},
+                "swaps": {"frames": [{"t": float(times[i]), "markers": [ids[a], ids[b]]} for i, a, b in swaps]},
+                "ar1_rho": d.ar1_rho,
+                "sigma_m": sigma_truth,
+            }
+        flights.append(FlightObservation(name=f.name, source="synth", times=times, marker_ids=ids, positions=pos,
+                                         sigma=sig_pt))
         alpha = flight_conditions(states, times, terms, ext if ext.size else None).alpha[0]
         omega_w = np.einsum("nij,nj->ni", quat_to_matrix(states[:, 6:10]), states[:, 10:13])
         truth_flights[f.name] = {
             "initial_state": {"t": 0.0, "position_m": y0[:3].tolist(), "velocity_m_s": y0[3:6].tolist(),
                               "quaternion_wxyz_body_to_world": y0[6:10].tolist(),
                               "omega_body_rad_s": y0[10:13].tolist()},
-            "launch": {k: v for k, v in f.__dict__.items() if k != "name"},
+            "launch": {k: v for k, v in f.__dict__.items() if k not in ("name", "defects")},
             "noise_m": sigma,
             "dropout": f.dropout,
             "n_dropped": int(drop.sum()),
@@ -302,6 +521,8 @@ def synthesize(spec: SynthSpec) -> SynthResult:
             "spin_range_rad_s": [float(np.abs(omega_w[:, 2]).min()), float(np.abs(omega_w[:, 2]).max())],
             "range_m": float(np.linalg.norm(states[-1, :2] - states[0, :2])),
         }
+        if defects_truth is not None:
+            truth_flights[f.name]["defects"] = defects_truth
     truth = {
         "name": spec.name, "seed": spec.seed, "sample_rate_hz": spec.sample_rate_hz,
         "coefficients": spec.coefficients.as_dict(), "physics": spec.physics,
@@ -424,10 +645,73 @@ def _read_imu_block(path, sec: Section, name: str, raw_flights: list) -> ImuSynt
                     first_row=first_row, flights=flights)
 
 
+def _read_defects(path, sec: Section) -> dict:
+    """The kinds given in a ``defects:`` block, as :class:`Defects` field values (``sec``: the block)."""
+    vals = {}
+    unknown = [k for k in sec.data if k not in DEFECT_KINDS]
+    if unknown:
+        raise ConfigError(path, sec.key(str(unknown[0])), f"unknown defect; known: {list(DEFECT_KINDS)}")
+    if sec.has("outliers"):
+        o = sec.section("outliers")
+        size = o.vector("size_m", 2, [0.02, 0.06])
+        if not 0 < size[0] <= size[1]:
+            raise ConfigError(path, o.key("size_m"), f"must be [low, high] with 0 < low ≤ high (m), got {size}")
+        vals.update(outlier_fraction=o.number("fraction", required=True, minimum=0.0, maximum=0.5),
+                    outlier_size_m=tuple(size))
+        o.finish()
+    if sec.has("swaps"):
+        w = sec.section("swaps")
+        vals.update(swap_frames=w.number("frames", 0, integer=True, nonnegative=True),
+                    swap_fraction=w.number("fraction", 0.0, minimum=0.0, maximum=0.5))
+        w.finish()
+    if sec.has("ar1"):
+        a = sec.section("ar1")
+        rho = a.number("rho", required=True)
+        if not -1.0 < rho < 1.0:
+            raise ConfigError(path, a.key("rho"), f"must be in (−1, 1), got {rho!r}")
+        vals["ar1_rho"] = rho
+        a.finish()
+    if sec.has("sigma_m"):
+        g = sec.section("sigma_m")
+        vals.update(sigma_fraction=g.number("fraction", 0.0, minimum=0.0, maximum=1.0),
+                    sigma_factor=g.number("factor", 1.0, positive=True),
+                    sigma_where=g.string("where", "segment", choices=("segment", "random")),
+                    per_point_sigma=True)
+        g.finish()
+    for k in DEFECT_KINDS:
+        sec.used.add(k)
+    return vals
+
+
 def load_synth_spec(path) -> tuple[SynthSpec, Path, Path]:
     """Read SYNTH.yaml; returns the spec and the marker/truth output paths (relative to the file)."""
     path = Path(path)
-    sec = Section(path, load_yaml(path))
+    return synth_spec_from_mapping(load_yaml(path), path)
+
+
+def synth_spec_from_mapping(data: dict, path) -> tuple[SynthSpec, Path, Path]:
+    """A synthetic data set from a SYNTH.yaml mapping already read.
+
+    Parameters
+    ----------
+    data : dict
+        The mapping (keys as SYNTH.yaml: docs/configuration.md).
+    path : str or Path
+        The file it stands for: named in errors; relative output paths resolve against its folder.
+
+    Returns
+    -------
+    spec : SynthSpec
+    markers_path, truth_path : Path
+        Where ``write_synth`` puts the marker file and the truth JSON.
+
+    Raises
+    ------
+    ConfigError
+        For a bad or unknown key, naming it.
+    """
+    path = Path(path)
+    sec = Section(path, data)
     name = sec.string("name", required=True)
     seed = sec.number("seed", 0, integer=True, nonnegative=True)
     rate = sec.number("sample_rate_hz", 120.0, positive=True)
@@ -443,6 +727,7 @@ def load_synth_spec(path) -> tuple[SynthSpec, Path, Path]:
     if not isinstance(raw_flights, list) or not raw_flights:
         raise ConfigError(path, "flights", "must be a non-empty list")
     imu = _read_imu_block(path, sec, name, raw_flights)
+    common_defects = _read_defects(path, sec.section("defects"))
     flights = []
     for i, rf in enumerate(raw_flights):
         f = Section(path, rf, f"flights[{i}]")
@@ -467,6 +752,7 @@ def load_synth_spec(path) -> tuple[SynthSpec, Path, Path]:
             noise_mm=f.number("noise_mm", 2.0, nonnegative=True),
             dropout=f.number("dropout", 0.0, minimum=0.0, maximum=0.9),
             gust=_gust(path, f),
+            defects=Defects(**{**common_defects, **_read_defects(path, f.section("defects"))}),
         ))
         f.finish()
     names = [f.name for f in flights]
