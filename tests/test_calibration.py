@@ -3,6 +3,9 @@ import json
 import re
 import textwrap
 
+from pathlib import Path
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -152,6 +155,24 @@ def test_good_cal_yaml_reads(tmp_path):
     assert cal.template.flights[0].duration == 0.4
 
 
+
+def test_truths_drawn_from_an_around_prior_are_the_fits_prior():
+    """Exact SBC: with ``truth.draw: prior`` the campaign draws from the prior the fit will use, also when
+    that prior is an ``around`` prior given under ``run.prior``; the shipped cal4 campaign is of this kind."""
+    from bayes_disc.inference.priors import coefficient_prior
+    from bayes_disc.physics import literature_coefficients
+    cal = load_cal_config(Path(__file__).parents[1] / "runs/calibration/cal4.yaml")
+    assert cal.truth.draw == "prior"
+    hh = literature_coefficients("hummel2002").as_dict()
+    assert cal.truth.values == pytest.approx(hh)
+    assert cal.truth.sd == pytest.approx({k: 0.1 * abs(v) for k, v in hh.items()})
+    from bayes_disc.inference.config import config_from_mapping
+    run = config_from_mapping({**cal.run, "name": "r", "flights": [{"file": "cal4.yaml"}],
+                               "markers": {"0": [0.1, 0, 0], "1": [0, 0.1, 0], "2": [-0.1, 0, 0]}},
+                              Path(__file__).parents[1] / "runs/calibration/cal4.yaml")
+    cp = coefficient_prior(run.prior)
+    assert cp.mean == pytest.approx(cal.truth.values) and cp.sd == pytest.approx(cal.truth.sd)
+
 # ------------------------------------------------------------------------------- a campaign on Dask
 def test_tiny_campaign_on_two_workers_resumes_without_redoing(tmp_path, capsys):
     """Two replicates, then three with replicate 0 deleted: only 0 and 2 run again; SPEC §6 keys."""
@@ -217,7 +238,8 @@ def _cal_keys(tmp_path, truth: dict) -> dict:
 
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(config_io.Section, "raw", recording)
-        mp.setattr(cal_config, "config_from_mapping", lambda *a, **k: None)
+        # the run block is the run configuration's (documented there); only its prior is used here
+        mp.setattr(cal_config, "config_from_mapping", lambda *a, **k: SimpleNamespace(prior="potts_crowther"))
         load_cal_config(cal)
     out = {}
     for k, v in seen.items():

@@ -40,7 +40,35 @@ CASES = {
                         "key 'markers'"),
     "unknown physics term": (("prior: potts_crowther", "prior: potts_crowther\nphysics: {magic: {}}"),
                              "key 'physics.magic'"),
+    "prior around an unknown set": (("prior: potts_crowther", "prior: {around: hummel2003}"),
+                                    "key 'prior.around': unknown coefficient set"),
+    "prior around without a width": (("prior: potts_crowther", "prior: {around: hummel2002, relative_sd: 0}"),
+                                     "key 'prior.relative_sd': must be positive"),
+    "prior around a zero value": (("prior: potts_crowther",
+                                   "prior: {around: {CL0: 0.2, CLa: 2.9, CD0: 0.08, CDa: 2.6, CM0: 0.0, CMa: 0.1, "
+                                   "CMq: -0.01, CRr: 0.01, CRp: -0.01, CNr: -1.0e-5}}"),
+                                  "sd of CM0 is not positive"),
+    "prior unknown sub-key": (("prior: potts_crowther", "prior: {around: hummel2002, width: 1}"),
+                              "key 'prior.width': unknown key"),
 }
+
+
+def test_prior_around_a_published_set(demo_copy):
+    """``prior: {around: ...}``: Gaussians at the set's values with sd relative_sd·|value| unless given."""
+    from bayes_disc.inference.data import build_problem
+    from bayes_disc.inference.priors import coefficient_prior
+    from bayes_disc.physics import COEFFICIENT_NAMES, literature_coefficients
+    cfg = demo_copy / "config.yaml"
+    _edit(cfg, "prior: potts_crowther", "prior: {around: hummel2002, relative_sd: 0.2, sd: {CNr: 3.0e-6}}")
+    c = load_config(cfg)
+    cp = coefficient_prior(c.prior)
+    hh = literature_coefficients("hummel2002").as_dict()
+    assert cp.name == "around" and cp.mean == pytest.approx(hh)
+    assert cp.sd["CLa"] == pytest.approx(0.2 * abs(hh["CLa"])) and cp.sd["CNr"] == 3.0e-6
+    p = build_problem(c)
+    i = list(COEFFICIENT_NAMES)
+    assert p.prior_mean[: len(i)] == pytest.approx([hh[n] for n in i])
+    assert p.prior_sd[: len(i)] == pytest.approx([cp.sd[n] for n in i])
 
 
 @pytest.mark.parametrize("kind", sorted(CASES))

@@ -7,7 +7,8 @@ seed: 16                   # replicate i draws everything from numpy's default_r
 template: synth.yaml       # SYNTH.yaml (relative to this file) or an inline mapping of its keys:
                            # flights (launch), noise_mm, dropout, defects, markers, sample_rate_hz …
 truth:                     # where the replicates' coefficients come from
-  draw: prior              # prior: the run's coefficient prior; around: N(values, sd²) independently
+  draw: prior              # prior: the run's coefficient prior (exact SBC; run.prior may be an ``around``
+                           # prior, e.g. {around: hummel2002, relative_sd: 0.1}); around: N(values, sd²)
   values: hummel2002       # (around) a literature set or {name: value}; default hummel2002
   relative_sd: 0.1         # (around) sd = relative_sd·|value| …
   sd: {CL0: 0.02}          # (around) … or given per coefficient (wins)
@@ -29,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..inference.config import PRIORS, config_from_mapping
+from ..inference.config import config_from_mapping
 from ..observation.config_io import ConfigError, Section, load_yaml
 from ..observation.synth import SynthSpec, load_synth_spec, synth_spec_from_mapping
 from ..physics import COEFFICIENT_NAMES, LITERATURE, literature_coefficients
@@ -126,7 +127,7 @@ def _template(path: Path, sec: Section) -> SynthSpec:
         raise ConfigError(path, f"template.{e.key}" if e.key else "template", e.problem) from None
 
 
-def _truth(path: Path, sec: Section, prior: str) -> TruthSpec:
+def _truth(path: Path, sec: Section, prior) -> TruthSpec:
     from ..inference.priors import coefficient_prior
     t = sec.section("truth")
     draw = t.string("draw", "prior", choices=TRUTH_DRAWS)
@@ -153,8 +154,9 @@ def _truth(path: Path, sec: Section, prior: str) -> TruthSpec:
     return TruthSpec(draw, values, sd, redraws)
 
 
-def _run_mapping(path: Path, sec: Section) -> dict:
-    """The ``run:`` block, checked by the run configuration's own validation (errors named ``run.<key>``)."""
+def _run_mapping(path: Path, sec: Section) -> tuple[dict, object]:
+    """The ``run:`` block, checked by the run configuration's own validation (errors named ``run.<key>``),
+    and the run's coefficient prior as that validation reads it (a name or an ``around`` prior)."""
     run = sec.raw("run", {}) or {}
     if not isinstance(run, dict):
         raise ConfigError(path, "run", "must be a mapping of run-configuration keys")
@@ -171,10 +173,10 @@ def _run_mapping(path: Path, sec: Section) -> dict:
     probe = {**run, "name": "probe", "flights": [{"file": path.name}],
              "markers": {"0": [0.1, 0.0, 0.0], "1": [0.0, 0.1, 0.0], "2": [-0.1, 0.0, 0.0]}}
     try:
-        config_from_mapping(probe, path, output_override=path.parent)
+        probed = config_from_mapping(probe, path, output_override=path.parent)
     except ConfigError as e:
         raise ConfigError(path, f"run.{e.key}" if e.key else "run", e.problem) from None
-    return run
+    return run, probed.prior
 
 
 def load_cal_config(path, output_override=None) -> CalConfig:
@@ -210,10 +212,7 @@ def cal_config_from_mapping(data: dict, path, output_override=None) -> CalConfig
     n = sec.number("replicates", required=True, integer=True, minimum=1)
     seed = sec.number("seed", 0, integer=True, nonnegative=True)
     template = _template(path, sec)
-    run = _run_mapping(path, sec)
-    prior = run.get("prior", "potts_crowther")
-    if prior not in PRIORS:                                  # checked by the probe already; for clarity
-        raise ConfigError(path, "run.prior", f"must be one of {list(PRIORS)}")
+    run, prior = _run_mapping(path, sec)
     truth = _truth(path, sec, prior)
     j = sec.section("launch_jitter")
     jitter = {}

@@ -37,8 +37,9 @@ from pathlib import Path
 
 from ..observation.config_io import ConfigError, Section, load_yaml
 from ..observation.config_blocks import read_disc_env, read_markers, read_physics
-from ..physics import Disc, Environment
+from ..physics import COEFFICIENT_NAMES, LITERATURE, Disc, Environment, literature_coefficients
 from ..physics.kernel import DEFAULT_METHOD, TABLEAUX
+from .priors import CoefficientPrior, prior_around
 
 PRIORS = ("potts_crowther", "weak")
 
@@ -80,6 +81,55 @@ class ImuSource:
     throws: tuple[tuple[int, int], ...] | None = None
 
 
+
+def read_prior(path: Path, sec: Section) -> "str | CoefficientPrior":
+    """The ``prior`` key: a named set (``potts_crowther``, ``weak``) or Gaussians around values.
+
+    ``prior: {around: hummel2002, relative_sd: 0.1, sd: {CNr: 1e-5}}`` — ``around`` a literature key
+    (``physics.LITERATURE``) or a mapping {coefficient: value} of all ten; sd = relative_sd·|value| unless
+    given under ``sd`` (:func:`.priors.prior_around`).
+
+    Parameters
+    ----------
+    path : Path
+        The configuration file (for errors).
+    sec : Section
+        The configuration's top level.
+
+    Returns
+    -------
+    str or CoefficientPrior
+        The name of a named set, or the ``around`` prior.
+
+    Raises
+    ------
+    ConfigError
+        Naming ``prior`` or its sub-key.
+    """
+    raw = sec.raw("prior", "potts_crowther")
+    if not isinstance(raw, dict):
+        return sec.string("prior", "potts_crowther", choices=PRIORS)
+    p = sec.section("prior")
+    around = p.raw("around", required=True)
+    if isinstance(around, str):
+        if around not in LITERATURE:
+            raise ConfigError(path, p.key("around"), f"unknown coefficient set {around!r}; known: {sorted(LITERATURE)}")
+        values, label = literature_coefficients(around).as_dict(), around
+    else:
+        v = Section(path, around, p.key("around"))
+        values = {n: v.number(n, required=True) for n in COEFFICIENT_NAMES}
+        v.finish()
+        label = "given values"
+    rel = p.number("relative_sd", 0.1, positive=True)
+    w = p.section("sd")
+    given = {n: w.number(n, positive=True) for n in COEFFICIENT_NAMES if w.has(n)}
+    w.finish()
+    p.finish()
+    try:
+        return prior_around(values, rel, given, label=label)
+    except ValueError as e:
+        raise ConfigError(path, "prior", str(e)) from None
+
 IMU_FORMATS = ("flatball-ins", "imu-csv")
 
 
@@ -91,7 +141,7 @@ class RunConfig:
     markers: dict
     disc: Disc = Disc()
     env: Environment = Environment()
-    prior: str = "potts_crowther"
+    prior: "str | CoefficientPrior" = "potts_crowther"
     output: Path = Path("runs/run")
     sampler: SamplerSettings = SamplerSettings()
     least_squares: LeastSquaresSettings = LeastSquaresSettings()
@@ -177,7 +227,7 @@ def config_from_mapping(data: dict, path, output_override=None) -> RunConfig:
         files.append(file)
     markers = read_markers(path, sec) if files or "markers" in sec.data else {}
     disc, env = read_disc_env(path, sec)
-    prior = sec.string("prior", "potts_crowther", choices=PRIORS)
+    prior = read_prior(path, sec)
     out = sec.string("output", None)
     output = (path.parent / out) if out else Path.cwd() / "runs" / name
     if output_override is not None:

@@ -6,6 +6,10 @@ dominate them: CL0 0.2 ± 0.2, CLa 2.96 ± 1.5, CD0 0.08 ± 0.1, CDa 2.6 ± 1.5,
 CMa 0.13 ± 0.3. Rate coefficients get weak zero-centred priors an order of magnitude wider than any
 published value: CMq, CRp 0 ± 0.05, CRr 0 ± 0.01 (rad/s)⁻¹, CNr 0 ± 1e−3 (rad/s)⁻¹.
 ``weak``: zero-centred Gaussians on everything: CL0, CD0, CM0 ± 1, CLa, CDa ± 5, CMa ± 2, rate terms as above.
+``around`` (:func:`prior_around`): independent Gaussians θ_k ~ N(v_k, s_k²) around a literature set or given
+values v_k, with s_k = relative_sd·|v_k| unless given per coefficient — the prior of a calibration campaign
+whose truths are drawn from it (simulation-based calibration is exact only when the fit's prior is the
+distribution the truths come from), or a user's informed prior.
 Initial conditions (both): centred on the data-derived start with sd 0.5 m, 5 m/s, 0.5 rad, 30 rad/s.
 Noise scales: p(σ_f) ∝ 1/σ_f (Jeffreys), integrated out analytically (see ``model``).
 """
@@ -25,13 +29,80 @@ IC_SD = {"position": 0.5, "velocity": 5.0, "attitude": 0.5, "omega": 30.0}
 
 @dataclass(frozen=True)
 class CoefficientPrior:
+    """Independent Gaussian priors θ_k ~ N(mean_k, sd_k²) on the ten coefficients.
+
+    Attributes
+    ----------
+    name : str
+        ``potts_crowther``, ``weak`` or ``around``.
+    mean, sd : dict
+        {coefficient: value} in the coefficient's unit (SPEC §2); every sd > 0.
+    description : str
+        One line for summary.json and the report.
+    """
+
     name: str
     mean: dict
     sd: dict
     description: str
 
 
-def coefficient_prior(name: str) -> CoefficientPrior:
+def prior_around(values: dict, relative_sd: float, sd: dict | None = None, label: str = "given values") -> CoefficientPrior:
+    """Gaussians around given coefficient values: θ_k ~ N(v_k, s_k²), s_k = ``sd[k]`` or relative_sd·|v_k|.
+
+    Parameters
+    ----------
+    values : dict
+        {coefficient: v_k} for all ten coefficients (SPEC §2 units).
+    relative_sd : float
+        s_k / |v_k| where ``sd`` does not give s_k.
+    sd : dict, optional
+        {coefficient: s_k} overriding the relative width.
+    label : str
+        Where the values come from (a literature key), for the description.
+
+    Returns
+    -------
+    CoefficientPrior
+        Named ``around``.
+
+    Raises
+    ------
+    ValueError
+        A coefficient missing from ``values``, or a width that is not positive (a zero value needs its sd).
+    """
+    missing = [k for k in COEFFICIENT_NAMES if k not in values]
+    if missing:
+        raise ValueError(f"prior around {label}: no value for {', '.join(missing)}")
+    sd = dict(sd or {})
+    widths = {k: float(sd[k]) if k in sd else relative_sd * abs(float(values[k])) for k in COEFFICIENT_NAMES}
+    bad = [k for k, w in widths.items() if not w > 0]
+    if bad:
+        raise ValueError(f"prior around {label}: sd of {', '.join(bad)} is not positive (give it under sd)")
+    own = f"sd {relative_sd:g}·|value|" + (f" ({', '.join(f'{k} {sd[k]:g}' for k in sd)} given)" if sd else "")
+    return CoefficientPrior(name="around", mean={k: float(values[k]) for k in COEFFICIENT_NAMES}, sd=widths,
+                            description=f"independent Gaussians around {label}, {own}")
+
+
+def coefficient_prior(name: "str | CoefficientPrior") -> CoefficientPrior:
+    """The coefficient prior of a run: a named set (module docstring), or a :class:`CoefficientPrior` as is.
+
+    Parameters
+    ----------
+    name : str or CoefficientPrior
+        ``potts_crowther`` or ``weak``; an ``around`` prior (:func:`prior_around`) is passed through.
+
+    Returns
+    -------
+    CoefficientPrior
+
+    Raises
+    ------
+    KeyError
+        An unknown name.
+    """
+    if isinstance(name, CoefficientPrior):
+        return name
     if name == "potts_crowther":
         mean = {k: POTTS_CROWTHER.values[k] for k in PC_WIDTHS}
         sd = dict(PC_WIDTHS)

@@ -55,6 +55,23 @@ N_PREDICTIVE_DRAWS = 1000
 BATCH = 500
 
 
+def prior_record(prior) -> dict:
+    """summary.json's ``prior``: name, description and each coefficient's Gaussian (mean, sd).
+
+    Parameters
+    ----------
+    prior : str or CoefficientPrior
+        The run's prior (:func:`.priors.coefficient_prior`).
+
+    Returns
+    -------
+    dict
+        ``name``, ``description``, ``mean`` and ``sd`` ({coefficient: value}).
+    """
+    cp = coefficient_prior(prior)
+    return {"name": cp.name, "description": cp.description, "mean": dict(cp.mean), "sd": dict(cp.sd)}
+
+
 @contextlib.contextmanager
 def _walkers_as_chains():
     """ArviZ warns when there are more chains than draws: with walkers as chains that is the intended layout
@@ -254,7 +271,7 @@ def build_summary(problem: Problem, chains: Chains, idata, ls_dict: dict, cfg_in
         "parameters": params,
         "coefficients": coef,
         "literature": literature_table(),
-        "prior": {"name": problem.prior_name, "description": coefficient_prior(problem.prior_name).description},
+        "prior": prior_record(problem.prior_name),
         "physics_terms": problem.model_ids,
         "convergence": {
             "converged": chains.converged, "reason": chains.reason, "ensembles": int(chains.chain.shape[0]),

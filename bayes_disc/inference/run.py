@@ -31,7 +31,7 @@ from ..observation.models import MarkerPositions
 from .data import build_problem
 from .inertial import load_run_throws
 from .leastsq import fit_least_squares
-from .results import build_inference_data, build_summary, format_table
+from .results import build_inference_data, build_summary, format_table, prior_record
 from .profile import profile_paths
 from .proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
 from .sampler import n_walkers, run_sampler, saved_steps
@@ -128,7 +128,8 @@ def run_key(cfg: RunConfig, problem) -> dict:
     settings = {k: v for k, v in asdict(cfg.sampler).items() if k not in RESUMABLE_SETTINGS}
     settings["walkers"] = n_walkers(cfg.sampler, problem.dim)
     return json.loads(json.dumps({"parameters": list(problem.names), "flights": flights,
-                                  "markers": cfg.markers, "prior": cfg.prior, "sampler": settings}))
+                                  "markers": cfg.markers, "prior": cfg.prior if isinstance(cfg.prior, str) else prior_record(cfg.prior),
+                                  "sampler": settings}))
 
 
 def check_same_run(cfg: RunConfig, problem, out: Path) -> None:

@@ -234,7 +234,7 @@ def estimated_text(ctx) -> str:
                                                   else "marker and sensor noise and logger parameters")
     return (f"<p class=lead>Estimated: {what}, with each flight's initial state and {noise}, from "
             f"<b>{n_f} flight{'s' if n_f != 1 else ''}</b> ({esc(', '.join(flights))}): {'; '.join(data)}. "
-            f"Prior: {esc(s['prior']['name'])}.</p>")
+            f"Prior: {esc(s['prior']['name'] if s['prior']['name'] != 'around' else s['prior']['description'])}.</p>")
 
 
 DEFAULT_TEN = ("CL0", "CLa", "CD0", "CDa", "CM0", "CMa", "CMq", "CRr", "CRp", "CNr")

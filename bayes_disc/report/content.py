@@ -34,11 +34,14 @@ def _range(x, digits=1, scale=1.0) -> str:
     return f"{np.nanmin(x):.{digits}f} … {np.nanmax(x):.{digits}f}"
 
 
-def _prior_table(name: str) -> dict:
-    """{coefficient: (mean, sd)} of the run's named Gaussian prior; empty if the name is unknown."""
+def _prior_table(prior: dict) -> dict:
+    """{coefficient: (mean, sd)} of the run's Gaussian prior from summary.json's ``prior`` record (its
+    ``mean``/``sd``, or for runs written before they were recorded, the named set); empty if unknown."""
+    if "mean" in prior and "sd" in prior:
+        return {k: (prior["mean"][k], prior["sd"][k]) for k in prior["mean"]}
     from ..inference.priors import coefficient_prior
     try:
-        cp = coefficient_prior(name)
+        cp = coefficient_prior(prior["name"])
     except KeyError:
         return {}
     return {k: (cp.mean[k], cp.sd[k]) for k in cp.mean}
@@ -126,7 +129,7 @@ def coefficient_table(ctx) -> Section:
     p = s["parameters"]
     lit = s["literature"]
     truth = ctx.truth_coefficients
-    prior = _prior_table(s["prior"]["name"])
+    prior = _prior_table(s["prior"])
     heads = (["coefficient", "prior mean ± sd", "median", "90 % interval", "95 % interval"]
              + [LIT_LABELS.get(k, k) for k in lit])
     if truth:
@@ -367,7 +370,7 @@ def identifiability_section(ctx) -> Section:
     guide = ("Whether the data determine each coefficient (identified, weak, unidentified) and why; which "
              "combinations they tie together; which throw would determine the rest.")
     parts, figs = [], []
-    prior = _prior_table(ctx.summary["prior"]["name"])
+    prior = _prior_table(ctx.summary["prior"])
     # the full records, or the top-level {name: {verdict, reason}} entries alone
     coefs = data.get("coefficients") or {k: v for k, v in data.items() if isinstance(v, dict) and "verdict" in v}
     post = ctx.summary["parameters"]
