@@ -27,6 +27,7 @@ import numpy as np
 
 from ..inference.config import RunConfig
 from ..inference.data import build_problem, load_run_flights
+from ..inference.inertial import load_run_throws
 from ..inference.leastsq import fit_least_squares
 from ..inference.run import RESULT, run_sample
 from ..observation.registry import unit
@@ -258,10 +259,11 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
     out = Path(cfg.output)
     out.mkdir(parents=True, exist_ok=True)
     flights = load_run_flights(cfg)
+    throws = load_run_throws(cfg)          # read (and their repairs reported) once, not once per candidate
     base_ids = tuple(cfg.physics)
 
     def build(ids):
-        return build_problem(cfg, terms_override=list(ids), flights=flights)
+        return build_problem(cfg, terms_override=list(ids), flights=flights, throws=throws)
 
     problem = build(base_ids)
     logger.info(f"{cfg.name}: {problem.n_flights} flights; base model"
