@@ -279,6 +279,15 @@ def test_verdict_lines_from_their_files():
     assert v.status == "attention" and v.text.startswith("1 of 3 coefficients identified; weak: CLa; unidentified: CD0")
     v = identifiability_verdict({"CL0": {"verdict": "identified", "reason": "r"}}, ["CL0"], "c.yaml")
     assert v.status == "ok" and v.text.startswith("1 of 1 coefficients identified")
+    assert "throw that would pin them down" not in v.text        # no design ranked: no throw promised
+    v = identifiability_verdict(data | {"design": {"ranking": [{"speed": 12.0}]}}, coefs, "c.yaml")
+    assert "reasons and the throw that would pin them down below" in v.text
+    from bayes_disc.report.answer import qualified_by_adequacy
+    ok = identifiability_verdict({"CL0": {"verdict": "identified", "reason": "r"}}, ["CL0"], "c.yaml")
+    q = qualified_by_adequacy(ok, {"verdict": "missing_physics", "unexplained": [{"flight": "a"}]})
+    assert q.status == "attention" and "not a finding" in q.text and q.text.startswith(ok.text)
+    assert qualified_by_adequacy(ok, {"verdict": "adequate", "unexplained": []}) == ok
+    assert qualified_by_adequacy(ok, None) == ok
     v = identifiability_verdict(None, coefs, "runs/x/config.yaml")
     assert v.status == "not run" and v.command == "bayes-disc identifiability runs/x/config.yaml"
     v = adequacy_verdict({"verdict": "adequate"}, "c.yaml")
@@ -360,6 +369,17 @@ def test_later_capabilities_slot_in_as_sections(tiny, tmp_path):
     with pytest.raises(ValueError, match="duplicate"):
         build_sections(ctx, [extra, extra])
 
+
+def test_identifiability_section_says_why_no_next_throw_was_ranked(tiny, tmp_path):
+    """Inertial-only runs skip the next-throw design (identifiability.json ``design.skipped``): the section
+    gives the reason instead of failing on a missing ranking."""
+    run = load_run(tiny["run"])
+    why = "not computed: the candidate throws are simulated as marker flights"
+    run.extras["identifiability"] = {"coefficients": {"CLa": {"verdict": "weak", "reason": "r"}},
+                                     "design": {"skipped": why}}
+    from bayes_disc.report import content
+    sec = build_sections(ReportContext(run, tmp_path / "figs"), [content.identifiability_section])[0]
+    assert "<h3>Next throw</h3>" in sec.html and why in sec.html and "ln volume gain" not in sec.html
 
 def test_diagnosis_adds_its_section_with_before_after_figure(tiny, tmp_path):
     """`diagnose` on a sampled run folder rebuilds the report with the missing-physics section filled in."""

@@ -112,7 +112,9 @@ def identifiability_verdict(data: dict | None, coefficients, config_path) -> Ver
         if groups.get(word):
             parts.append(f"{word}: {', '.join(groups[word])}")
     bad = any(groups.get(w) for w in ("weak", "unidentified"))
-    text = "; ".join(parts) + (" (reasons and the throw that would pin them down below)." if bad else ".")
+    designed = bool((data.get("design") or {}).get("ranking")) if isinstance(data, dict) else False
+    below = "reasons and the throw that would pin them down below" if designed else "reasons below"
+    text = "; ".join(parts) + (f" ({below})." if bad else ".")
     return Verdict("Identifiability", "attention" if bad else "ok", text, link="identifiability")
 
 
@@ -267,6 +269,28 @@ def answer_table(ctx) -> str:
     return table(heads, rows, "num answer")
 
 
+def qualified_by_adequacy(ident: Verdict, diagnosis: dict | None) -> Verdict:
+    """The identifiability line, qualified when ``diagnose`` left structure no term explains: the verdicts
+    then describe the curvature of a model the data reject, so "identified" is not a finding.
+
+    Parameters
+    ----------
+    ident : Verdict
+        :func:`identifiability_verdict`'s line.
+    diagnosis : dict or None
+        Content of ``diagnosis.json``.
+
+    Returns
+    -------
+    Verdict
+        ``ident``, or the same line with the caveat and status "attention".
+    """
+    if not diagnosis or not diagnosis.get("unexplained") or ident.status == "not run":
+        return ident
+    text = (ident.text + " These verdicts are local to a model that leaves unexplained structure in the "
+            "data (Model adequacy): an identified coefficient of a misfitting model is not a finding.")
+    return Verdict(ident.topic, "attention", text, ident.command, ident.link)
+
 def answer_section(ctx) -> Section:
     """The first screen: what was estimated, the three verdicts, the coefficient table."""
     conv = convergence_verdict(ctx.summary["convergence"], ctx.summary.get("sampler_settings"))
@@ -274,6 +298,7 @@ def answer_section(ctx) -> Section:
     diag = ctx.run.extras.get("diagnosis")
     coverage = None if diag or not ctx.marker_flights else ctx.predictive_coverage   # markers' predictive check
     adequacy = adequacy_verdict(diag, ctx.run.config_path, coverage)
+    ident = qualified_by_adequacy(ident, diag)
     verdicts = '<ul class="verdicts">' + "".join(render_verdict(v) for v in (conv, ident, adequacy)) + "</ul>"
     lit_note = ("<p class=note><i>in</i> / <i>out</i>: the published (or true) value lies inside / outside the "
                 "posterior 90 % interval. Published values come from other discs and other methods, so "

@@ -414,7 +414,9 @@ def identifiability_section(ctx) -> Section:
             ["coefficient", "shape", "half-width (deviance 1)", "points"],
             [[n, v["shape"], fmt(v.get("halfwidth"), 3), len(v["value"])] for n, v in prof.items()]))
     design = data.get("design")
-    if design:
+    if design and "skipped" in design:
+        parts.append(f"<h3>Next throw</h3><p>{esc(design['skipped'])}.</p>")
+    elif design:
         parts.append(f"<h3>Next throw</h3><p>{esc(design['recommendation'])}</p>" + table(
             ["rank", "speed [m/s]", "launch angle [deg]", "α at release [deg]", "spin [rad/s]", "ln volume gain"],
             [[i + 1, fmt(r["speed"]), fmt(r["launch_angle_deg"]), fmt(r["alpha_deg"]), fmt(r["spin"]), fmt(r["gain"], 3)]
