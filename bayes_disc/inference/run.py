@@ -98,6 +98,24 @@ def flight_info(problem) -> dict:
     return out
 
 
+def noise_info(problem) -> dict:
+    """Per marker flight: its noise model (:meth:`~bayes_disc.observation.models.noise.MarkerNoise.describe`:
+    ``model``, ``per_point`` (``sigma_m``, ``covariance`` or null), ``reference_sigma_m`` ḡ [m] (σ_f / ḡ is
+    the scale factor of the stated per-point errors) and the unit's own parameters)."""
+    return {f.name: c.noise.describe() for f, ch in zip(problem.flights, problem.channels) for c in ch
+            if isinstance(c, MarkerPositions)}
+
+
+def noise_words(info: dict) -> str:
+    """"flight a: ar1, per-point errors from sigma_m (ḡ = 2.1 mm)" per flight, for the log."""
+    out = []
+    for name, d in info.items():
+        pp = (f", per-point errors from {d['per_point']} (geometric mean {d['reference_sigma_m'] * 1e3:.3g} mm)"
+              if d["per_point"] else ", one σ for every point")
+        out.append(f"{name}: {d['model']}{pp}")
+    return "; ".join(out)
+
+
 def _data_words(problem) -> str:
     """"3 flights, 1200 marker points, 5400 inertial values"."""
     markers = sum(int(c.data.n_points) for ch in problem.channels for c in ch if isinstance(c, MarkerPositions))
@@ -127,8 +145,12 @@ def run_key(cfg: RunConfig, problem) -> dict:
     flights = {name: {k: v for k, v in f.items() if k != "file"} for name, f in flight_info(problem).items()}
     settings = {k: v for k, v in asdict(cfg.sampler).items() if k not in RESUMABLE_SETTINGS}
     settings["walkers"] = n_walkers(cfg.sampler, problem.dim)
-    return json.loads(json.dumps({"parameters": list(problem.names), "flights": flights,
-                                  "markers": cfg.markers, "prior": cfg.prior, "sampler": settings}))
+    key = {"parameters": list(problem.names), "flights": flights, "markers": cfg.markers, "prior": cfg.prior,
+           "sampler": settings}
+    noise = noise_info(problem)
+    if any(d["model"] != "gaussian" or d["per_point"] for d in noise.values()):
+        key["noise"] = noise                       # only when not the plain model: older runs still resume
+    return json.loads(json.dumps(key))
 
 
 def check_same_run(cfg: RunConfig, problem, out: Path) -> None:
@@ -309,6 +331,8 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
         throws = load_run_throws(cfg) if cfg.imu else []
         problem = build_problem(cfg, throws=throws)
         st.result = f"{cfg.name}: {_data_words(problem)}, {problem.dim} parameters"
+        if noise_info(problem):
+            logger.info(f"marker noise: {noise_words(noise_info(problem))}")
         for t in throws:
             if t.status != "ok":
                 logger.info(f"{t.name}: {t.status}: {t.reason}")
@@ -341,7 +365,7 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
         st.result = f"{chains.reason} at step {chains.total_steps}"
     with stage("outputs", "summary.json, posterior.nc, run_info.json"):
         info = {"name": cfg.name, "config": str(cfg.path), "flights": flight_info(problem),
-                "sampler_settings": asdict(cfg.sampler), "markers": cfg.markers}
+                "sampler_settings": asdict(cfg.sampler), "markers": cfg.markers, "noise": noise_info(problem)}
         if throws:
             info["inertial_throws"] = {t.name: t.to_dict() for t in throws}
         idata = build_inference_data(problem, chains, np.random.default_rng(cfg.sampler.seed))
