@@ -300,7 +300,7 @@ def test_noise_configuration_keys_and_errors(folder):
     cfg = _config(folder, "c", "noise: {model: ar1}\nflight_options: {b: {noise: {per_point: false}}}")
     assert cfg.flight_noise("a")[0].model == "ar1" and cfg.flight_noise("b")[0].per_point == "false"
     assert cfg.flight_noise("b")[0].model == "ar1"
-    with pytest.raises(ConfigError, match=r"noise\.model.*one of \['gaussian', 'ar1'\], got 'student'"):
+    with pytest.raises(ConfigError, match=r"noise\.model.*one of \['gaussian', 'ar1', 'robust'\], got 'student'"):
         _config(folder, "c", "noise: {model: student}")
     with pytest.raises(ConfigError, match=r"noise\.per_point.*got 'maybe'"):
         _config(folder, "c", "noise: {per_point: maybe}")
@@ -364,3 +364,56 @@ def test_ar1_and_per_point_run_through_the_outputs(folder):
     assert total == pytest.approx(exact, rel=1e-5)
     pp = idata.posterior_predictive
     assert np.all(np.isfinite(pp["markers_a"].values)) and np.all(np.isfinite(pp["markers_b"].values))
+
+
+# --------------------------------------------------------------------------------------------- robust
+def test_robust_flags_an_outlier_and_recognises_a_swap(clean):
+    """A 5 cm outlier and one frame with markers 0 and 2 exchanged, on a least-squares fit of a short flight:
+    the outlier is listed as an outlier, the frame as a swap of 0 and 2 (not as two outliers), and the
+    refit on the cleaned data recovers the clean fit."""
+    from bayes_disc.inference.robust import robust_refit
+    rng = np.random.default_rng(21)
+    pos = clean.positions + 1.5e-3 * rng.normal(size=clean.positions.shape)
+    plain = replace(clean, positions=pos.copy())
+    pos[10, 1] += np.array([0.03, -0.04, 0.0])                 # |Δ| = 5 cm
+    pos[25, [0, 2]] = pos[25, [2, 0]]
+    bad = replace(clean, positions=pos)
+    problem = _problem(bad, noise_model="robust")
+    ls0 = _fit(problem)
+    cleaned, ls, flags = robust_refit(problem, ls0, max_nfev=100)
+    f = flags["a"]
+    assert [(o["t"], o["marker"]) for o in f["outliers"]] == [(clean.times[10], IDS[1])], f
+    assert [(s["t"], s["markers"]) for s in f["swaps"]] == [(clean.times[25], [IDS[0], IDS[2]])], f
+    assert f["swaps"][0]["probability"] > 0.99 and f["outliers"][0]["probability"] > 0.99
+    assert cleaned.flights[0].n_points == bad.n_points - 1
+    np.testing.assert_array_equal(cleaned.flights[0].positions[25], plain.positions[25])
+    ref = refine_least_squares(_problem(plain), ls0.theta, max_nfev=100)     # the clean data, same start
+    sd = np.sqrt(np.diag(ref.cov))[:10]
+    assert np.all(np.abs(ls.theta[:10] - ref.theta[:10]) < 0.5 * sd)
+    assert np.any(np.abs(ls0.theta[:10] - ref.theta[:10]) > 0.5 * sd)      # the defects did pull the plain fit
+
+
+def test_classification_probabilities_by_hand():
+    """Two markers far apart, one frame: exchanged labels are a swap; one displaced marker is an outlier."""
+    from bayes_disc.observation.models.outliers import (OUTLIER_FRACTION, OUTLIER_WIDTH_M, SWAP_FRACTION,
+                                                        classify, clean_flight)
+    pred = np.array([[[0.0, 0.0, 1.0], [0.1, 0.0, 1.0], [0.0, 0.1, 1.0]]] * 3)
+    obs = pred.copy()
+    obs[1, [0, 1]] = obs[1, [1, 0]]
+    obs[2, 2] += [0.0, 0.0, 0.03]
+    s = np.full((3, 3), 2e-3)
+    c = classify("f", np.arange(3) / 120, IDS, pred, obs, s)
+    assert c.swapped_frames() == [(1, 0, 1, pytest.approx(1.0))]
+    assert [(i, j) for i, j, _ in c.outlier_points()] == [(2, 2)]
+    # frame 2 by hand: H0 with point 2 an outlier against every swap hypothesis
+    ln3 = lambda r, sd: -1.5 * np.log(2 * np.pi * sd ** 2) - 0.5 * np.sum(np.square(r)) / sd ** 2
+    inl = lambda r: np.logaddexp(np.log1p(-OUTLIER_FRACTION) + ln3(r, 2e-3), np.log(OUTLIER_FRACTION) + ln3(r, OUTLIER_WIDTH_M))
+    out2 = np.log(OUTLIER_FRACTION) + ln3([0, 0, 0.03], OUTLIER_WIDTH_M) - inl([0, 0, -0.03])
+    assert c.outlier[2, 2] == pytest.approx(np.exp(out2) * (1 - c.swap[2].sum()), rel=1e-6)
+    data = FlightObservation("f", "", np.arange(3) / 120, IDS, obs)
+    fixed = clean_flight(data, c.records())
+    np.testing.assert_array_equal(fixed.positions[1], pred[1])
+    assert np.isnan(fixed.positions[2, 2]).all() and fixed.n_points == 8
+    with pytest.raises(ValueError, match="no sample at t = 5"):
+        clean_flight(data, {"outliers": [{"t": 5.0, "marker": IDS[0]}]})
+    assert SWAP_FRACTION == 0.01

@@ -227,6 +227,21 @@ class Problem:
                        term_start=self.term_start, settings=self.settings, rates=[self.rates[k]],
                        kernel_terms=self.kernel_terms, observations=observations, own_start=own)
 
+    def with_marker_data(self, flights: dict) -> "Problem":
+        """The same problem with some flights' marker recordings replaced ({name: FlightObservation} on the
+        same sample grid, e.g. cleaned of outliers): same parameters, starts and noise settings."""
+        unknown = sorted(set(flights) - {f.name for f in self.flights})
+        if unknown:
+            raise KeyError(f"no flight(s) {unknown} in the problem")
+        records = [flights.get(f.name, f) if isinstance(f, FlightObservation) else f for f in self.flights]
+        observations = [tuple(c.for_data(flights[c.flight]) if isinstance(c, MarkerPositions) and c.flight in flights
+                              else c for c in ch) for ch in self.channels]
+        return Problem(flights=records, marker_body=self.marker_body, disc=self.disc, env=self.env,
+                       prior_name=self.prior_name, terms=self.terms, explanations=self.explanations,
+                       start_states=self.start_states, term_start=self.term_start, settings=self.settings,
+                       rates=self.rates, kernel_terms=self.kernel_terms, observations=observations,
+                       own_start=self.own_start)
+
     def start_vector(self) -> np.ndarray:
         """(dim,) prior means with the extension parameters at their starting values."""
         x = self.prior_mean.copy()

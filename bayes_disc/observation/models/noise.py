@@ -28,6 +28,10 @@ Units (``noise.model`` in the run configuration):
   e_i = (z_i − ρ^k z_{i−1}) / √(1 − ρ^{2k}), log |W| = −½ Σ log(1 − ρ^{2k_i}) (per coordinate).
   Parameter ``rho`` (public ``rho_<flight>``, dimensionless), prior N(0, 0.5²) truncated to (−1, 1)
   (outside it the likelihood is zero).
+* ``robust`` (:class:`RobustNoise`): the ``gaussian`` likelihood on the data cleaned of gross errors —
+  points judged outliers are dropped and frames judged label-swapped restored by an inlier/outlier and
+  swap mixture (:mod:`.outliers`, repeated with the fit until the judgement is stable); the posterior is
+  conditional on that judgement.
 
 Per-point errors (``noise.per_point``), :class:`PointScales`: a per-row ``sigma_m`` s_i [m] (the same for
 x, y and z), or the covariance Σ_i [m²] (columns ``cov_xx … cov_zz`` written by ``bayes-disc track``),
@@ -47,9 +51,10 @@ from typing import ClassVar
 import numpy as np
 
 from ...physics import TermParameter
+from .outliers import OUTLIER_FRACTION, OUTLIER_WIDTH_M, SWAP_FRACTION
 
 #: ``noise.model`` values
-NOISE_MODELS = ("gaussian", "ar1")
+NOISE_MODELS = ("gaussian", "ar1", "robust")
 #: ``noise.per_point`` values
 PER_POINT = ("auto", "true", "false")
 
@@ -193,6 +198,21 @@ class WhiteNoise(MarkerNoise):
     def sample(self, sigma, own, rng):
         eps = sigma[:, None, None, None] * rng.standard_normal((sigma.size, *self.observed.shape, 3))
         return _shape_points(eps, self.points, self.observed)
+
+
+@dataclass(eq=False)
+class RobustNoise(WhiteNoise):
+    """``gaussian`` noise on data cleaned of outlying points and label swaps (:mod:`.outliers`)."""
+
+    id = "robust"
+    title = "Gaussian marker noise after removing outliers and label swaps"
+    equations = ("judged: p(r_i) = (1 − π) N(0, σ_i² I₃) + π N(0, w² I₃), π = 0.01, w = 0.05 m; frames: labels "
+                 "as given (1 − π_s) or one pair exchanged (π_s = 0.01); fitted: the gaussian model on the "
+                 "cleaned data")
+
+    def describe(self) -> dict:
+        return super().describe() | {"outlier_fraction": OUTLIER_FRACTION, "outlier_width_m": OUTLIER_WIDTH_M,
+                                     "swap_fraction": SWAP_FRACTION}
 
 
 def _shape_points(eps: np.ndarray, points: PointScales | None, observed: np.ndarray | None) -> np.ndarray:
@@ -368,7 +388,7 @@ def marker_noise(data, model: str = "gaussian", per_point: str = "auto") -> Mark
     ----------
     data : FlightObservation
         The flight's marker data.
-    model : {"gaussian", "ar1"}
+    model : {"gaussian", "ar1", "robust"}
         The noise model (module docstring).
     per_point : {"auto", "true", "false"}
         Per-point errors (:func:`point_scales`).
@@ -386,8 +406,8 @@ def marker_noise(data, model: str = "gaussian", per_point: str = "auto") -> Mark
         raise ValueError(f"noise.model: unknown value {model!r} (choices: {', '.join(NOISE_MODELS)})")
     points = point_scales(data, per_point)
     seen = data.observed
-    if model == "gaussian":
-        return WhiteNoise(points=points, observed=seen)
+    if model in ("gaussian", "robust"):
+        return (WhiteNoise if model == "gaussian" else RobustNoise)(points=points, observed=seen)
     frames = frame_index(data.times, data.name)
     ti, _ = np.nonzero(seen)
     return AR1Noise(points=points, frame=frames[ti], previous=previous_points(seen), observed=seen, frames=frames)
