@@ -417,3 +417,50 @@ def test_classification_probabilities_by_hand():
     with pytest.raises(ValueError, match="no sample at t = 5"):
         clean_flight(data, {"outliers": [{"t": 5.0, "marker": IDS[0]}]})
     assert SWAP_FRACTION == 0.01
+
+
+def test_sample_with_robust_and_ar1_noise_writes_the_flags(tmp_path, monkeypatch):
+    """`bayes-disc sample` end to end (short chains): flight a (robust) has a 4 cm outlier and a swapped frame
+    edited into its CSV, flight b has AR(1) noise; flagged.json, the log, summary.json and posterior.nc say so."""
+    import json
+    import logging
+    import arviz as az
+    from bayes_disc.cli import main
+    from bayes_disc.observation.markers import write_marker_csv
+    from bayes_disc.observation.synth import write_synth
+    monkeypatch.chdir(tmp_path)
+    flights = (LaunchSpec(name="a", speed=12.0, launch_angle_deg=4, alpha_deg=8, spin=55, duration=0.3, noise_mm=1.5),
+               LaunchSpec(name="b", speed=10.0, launch_angle_deg=8, alpha_deg=12, spin=-50, duration=0.3, noise_mm=1.5))
+    write_synth(synthesize(SynthSpec(name="s", flights=flights, seed=6)), tmp_path / "flights.csv", tmp_path / "truth.json")
+    table = read_marker_csv(tmp_path / "flights.csv")
+    rows_a = np.flatnonzero(table.flight == "a")
+    t_out, t_swap = table.t[rows_a[30]], table.t[rows_a[45]]
+    table.xyz[rows_a[30]] += [0.0, 0.04, 0.0]
+    frame = rows_a[table.t[rows_a] == t_swap]
+    m = {str(table.marker[r]): r for r in frame}
+    table.xyz[[m["0"], m["1"]]] = table.xyz[[m["1"], m["0"]]]
+    write_marker_csv(tmp_path / "flights.csv", table)
+    (tmp_path / "config.yaml").write_text(CONFIG.format(name="rob", extra=(
+        "output: out\nnoise: {model: robust}\nflight_options: {b: {noise: {model: ar1}}}\n"
+        "sampler: {ensembles: 2, max_steps: 30, adapt_steps: 10, check_every: 10, min_steps: 10, seed: 5}\n"
+        "least_squares: {starts: 1}")))
+    records = []
+    handler = logging.Handler()
+    handler.emit = lambda rec: records.append(rec.getMessage())
+    logging.getLogger("bayes_disc").addHandler(handler)
+    try:
+        assert main(["sample", str(tmp_path / "config.yaml"), "--no-progress"]) == 0
+    finally:
+        logging.getLogger("bayes_disc").removeHandler(handler)
+    flags = json.loads((tmp_path / "out" / "flagged.json").read_text())
+    assert [(o["t"], o["marker"]) for o in flags["a"]["outliers"]] == [(pytest.approx(t_out), str(table.marker[rows_a[30]]))]
+    assert [(w["t"], w["markers"]) for w in flags["a"]["swaps"]] == [(pytest.approx(t_swap), ["0", "1"])]
+    assert "b" not in flags
+    assert any("labels swapped" in r for r in records) and any("outlier (p =" in r for r in records)
+    assert any("marker noise: a: robust" in r and "b: ar1" in r for r in records)
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["flagged"] == {"file": "flagged.json", "outliers": 1, "swaps": 1}
+    assert summary["noise"]["a"]["model"] == "robust" and summary["noise"]["b"]["model"] == "ar1"
+    assert "rho_b" in summary["parameters"] and "rho_a" not in summary["parameters"]
+    post = az.from_netcdf(str(tmp_path / "out" / "posterior.nc")).posterior
+    assert np.isfinite(post["rho"].sel(flight="b")).all() and np.isnan(post["rho"].sel(flight="a")).all()

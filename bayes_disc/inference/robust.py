@@ -11,6 +11,9 @@ data, and this is repeated until the flags no longer change (at most :data:`MAX_
 """
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 from scipy.stats import chi2
 
@@ -20,6 +23,8 @@ from ..observation.models.outliers import Classification, classify, clean_flight
 from .leastsq import LeastSquaresResult, refine_least_squares
 from .model import Problem
 
+#: the judgement a run wrote (in its output folder)
+FLAGGED = "flagged.json"
 #: most judge–clean–refit rounds
 MAX_ROUNDS = 5
 _CHI2_3_MEDIAN = float(chi2.median(3))
@@ -95,3 +100,31 @@ def apply_flags(problem: Problem, flags: dict) -> Problem:
     """The problem with saved flags (``flagged.json``) applied to its robust flights' recordings (resume)."""
     return problem.with_marker_data({c.flight: clean_flight(c.data, flags.get(c.flight, {}))
                                      for _, c in robust_flights(problem)})
+
+
+def with_saved_flags(problem: Problem, run_dir) -> Problem:
+    """The problem a finished (or interrupted) run sampled: its robust flights cleaned as the run's
+    ``flagged.json`` says (unchanged without robust flights).
+
+    Parameters
+    ----------
+    problem : Problem
+        Rebuilt from the run's configuration (data as recorded).
+    run_dir : str or Path
+        The run's output folder.
+
+    Returns
+    -------
+    Problem
+
+    Raises
+    ------
+    FileNotFoundError
+        If the problem has robust flights but the folder has no ``flagged.json``.
+    """
+    if not robust_flights(problem):
+        return problem
+    path = Path(run_dir) / FLAGGED
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: missing; the run's robust flights were cleaned as it lists (re-run sample)")
+    return apply_flags(problem, json.loads(path.read_text()))

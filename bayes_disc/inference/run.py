@@ -35,7 +35,7 @@ from .inertial import load_run_throws
 from .leastsq import fit_least_squares
 from .results import build_inference_data, build_summary, format_table
 from .profile import profile_paths
-from .robust import apply_flags, robust_flights, robust_refit
+from .robust import FLAGGED, robust_flights, robust_refit, with_saved_flags
 from .proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
 from .sampler import n_walkers, run_sampler, saved_steps
 from .versions import software_versions
@@ -49,8 +49,6 @@ RUN_KEY = "run_key.json"
 RESUMABLE_SETTINGS = ("max_steps", "check_every", "min_steps", "n_tau", "rhat", "ess", "processes")
 #: least-squares files a resume reuses
 LEAST_SQUARES_FILES = ("least_squares.json", "least_squares_theta.npy", "least_squares_cov.npy")
-#: points judged outliers and frames judged label-swapped (``robust`` marker noise)
-FLAGGED = "flagged.json"
 
 
 class Stage:
@@ -371,7 +369,7 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
         throws = load_run_throws(cfg) if cfg.imu else []
         problem = build_problem(cfg, throws=throws)
         if resume and robust_flights(problem) and (out / FLAGGED).is_file() and (out / "chains" / RUN_KEY).is_file():
-            problem = apply_flags(problem, json.loads((out / FLAGGED).read_text()))
+            problem = with_saved_flags(problem, out)
             logger.info(f"resume: the saved judgement of outliers and label swaps ({out / FLAGGED}) is applied")
         st.result = f"{cfg.name}: {_data_words(problem)}, {problem.dim} parameters"
         if noise_info(problem):
