@@ -5,7 +5,6 @@ from dataclasses import replace
 import numpy as np
 import pytest
 from scipy.integrate import quad
-from scipy.special import logsumexp
 from scipy.stats import multivariate_normal
 
 from bayes_disc.inference.initial import initial_state_from_data
