@@ -21,7 +21,10 @@ simulator: {method: vern7, step_factor: null}   # Runge–Kutta tableau and step
 physics: {side_force: {CY: 0.0}}        # extra terms (physics.TERMS) and data explanations
                                          # (marker_geometry, time_offset); values are starting guesses
 flight_options:                          # per flight, by name
-  fffl10: {t_start: 0.0, t_end: 0.8}     # time window [s]
+  fffl10: {t_start: 0.0, t_end: 0.8,     # time window [s]
+           noise: {model: ar1}}          # this flight's noise model (overrides the top-level keys given)
+noise: {model: gaussian, per_point: auto}   # marker noise model (gaussian | ar1) and per-point errors
+                                         # (auto: use sigma_m / covariance columns when the file has them)
 truth: truth.json                        # optional truth file (synthetic data) for reports
 imu:                                     # inertial logs (instead of or besides `flights`)
   - file: data/2025-08-31-002-rb.csv
@@ -32,11 +35,12 @@ credit: "where the data come from"       # shown in the report wherever the data
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from ..observation.config_io import ConfigError, Section, load_yaml
 from ..observation.config_blocks import read_disc_env, read_markers, read_physics
+from ..observation.models.noise import NOISE_MODELS, PER_POINT
 from ..physics import COEFFICIENT_NAMES, LITERATURE, Disc, Environment, literature_coefficients
 from ..physics.kernel import DEFAULT_METHOD, TABLEAUX
 from .priors import CoefficientPrior, prior_around
@@ -67,9 +71,19 @@ class LeastSquaresSettings:
 
 
 @dataclass(frozen=True)
+class NoiseSettings:
+    """Marker noise of a flight (:mod:`bayes_disc.observation.models.noise`): the model and whether
+    per-point errors (``sigma_m`` or covariance columns) are used (``auto``: when the file has them)."""
+
+    model: str = "gaussian"
+    per_point: str = "auto"
+
+
+@dataclass(frozen=True)
 class FlightOption:
     t_start: float | None = None
     t_end: float | None = None
+    noise: dict = field(default_factory=dict)     # overrides of NoiseSettings' fields for this flight
 
 
 @dataclass(frozen=True)
@@ -152,10 +166,19 @@ class RunConfig:
     truth: Path | None = None
     imu: tuple[ImuSource, ...] = ()
     credit: str = ""
+    noise: NoiseSettings = NoiseSettings()
 
     @property
     def marker_ids(self) -> tuple[str, ...]:
         return tuple(self.markers)
+
+    def flight_noise(self, flight: str) -> tuple[NoiseSettings, str]:
+        """The noise settings of ``flight`` (top level, overridden by its ``flight_options``) and the
+        configuration key that set them (for error messages)."""
+        o = self.flight_options.get(flight)
+        if o is None or not o.noise:
+            return self.noise, "noise"
+        return replace(self.noise, **o.noise), f"flight_options.{flight}.noise"
 
 
 def load_config(path, output_override=None) -> RunConfig:
@@ -263,12 +286,14 @@ def config_from_mapping(data: dict, path, output_override=None) -> RunConfig:
     flight_options = {}
     for fname, opts in fo_raw.items():
         o = Section(path, opts, f"flight_options.{fname}")
-        fo = FlightOption(t_start=o.number("t_start", None), t_end=o.number("t_end", None))
+        fo = FlightOption(t_start=o.number("t_start", None), t_end=o.number("t_end", None),
+                          noise=_read_noise(path, o.section("noise"), None))
         o.finish()
         if fo.t_start is not None and fo.t_end is not None and fo.t_end <= fo.t_start:
             raise ConfigError(path, f"flight_options.{fname}.t_end", "must be after t_start")
         flight_options[str(fname)] = fo
     credit = sec.string("credit", None) or ""
+    noise = NoiseSettings(**_read_noise(path, sec.section("noise"), NoiseSettings()))
     truth = sec.string("truth", None)
     truth_path = path.parent / truth if truth else None
     if truth_path is not None and not truth_path.is_file():
@@ -277,7 +302,23 @@ def config_from_mapping(data: dict, path, output_override=None) -> RunConfig:
     return RunConfig(path=path, name=name, files=tuple(files), markers=markers, disc=disc, env=env, prior=prior,
                      output=output, sampler=sampler, least_squares=least, simulator_method=method,
                      simulator_step_factor=step, physics=physics, flight_options=flight_options, truth=truth_path,
-                     imu=imu, credit=credit)
+                     imu=imu, credit=credit, noise=noise)
+
+
+def _read_noise(path: Path, sec: Section, defaults: NoiseSettings | None) -> dict:
+    """A ``noise:`` block → {field: value} (with ``defaults`` filled in; without, only the keys given)."""
+    out = {}
+    model = sec.string("model", None if defaults is None else defaults.model, choices=NOISE_MODELS)
+    if model is not None:
+        out["model"] = model
+    pp = sec.raw("per_point", None if defaults is None else defaults.per_point)
+    if pp is not None:
+        pp = {True: "true", False: "false"}.get(pp, pp) if isinstance(pp, bool) else pp
+        if pp not in PER_POINT:
+            raise ConfigError(path, sec.key("per_point"), f"must be one of {list(PER_POINT)}, got {pp!r}")
+        out["per_point"] = pp
+    sec.finish()
+    return out
 
 
 def _read_imu(path: Path, sec: Section) -> tuple[ImuSource, ...]:

@@ -71,12 +71,16 @@ def build_problem(cfg: RunConfig, terms_override=None, flights=None, throws=None
             starts.append(initial_state_from_data(f, mb))
         except ValueError as e:
             raise ConfigError(cfg.path, "flights", str(e)) from None
-        channels = [MarkerPositions(f, mb, tuple(explanations))]
-        extra = []
+        noise, key = cfg.flight_noise(f.name)
+        try:
+            channels = [MarkerPositions(f, mb, tuple(explanations), noise_model=noise.model, per_point=noise.per_point)]
+        except ValueError as e:
+            raise ConfigError(cfg.path, key, str(e)) from None
+        extra = [p.off_value for p in channels[0].parameters]
         t = by_name.pop(f.name, None)
         if t is not None:
             channels.append(inertial_model(t, cfg.env.g))
-            extra = list(own_start(channels[-1], t))
+            extra += list(own_start(channels[-1], t))
         records.append(f)
         observations.append(tuple(channels))
         own.append(np.array(extra, float))

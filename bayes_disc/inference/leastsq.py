@@ -43,10 +43,12 @@ def _steps(problem: Problem, x: np.ndarray) -> np.ndarray:
 
 
 def whitened_residuals(x: np.ndarray, problem: Problem, sigma: np.ndarray) -> np.ndarray:
+    """Every flight's effective residuals (:meth:`Problem.noise_residuals`) divided by their group's σ, then
+    the prior's standardised deviations: ½ |·|² is the negative log-posterior with σ fixed."""
     parts = []
     theta = x[None]
     for k in range(problem.n_flights):
-        r, ok = problem.residuals(theta, k)
+        r, ok = problem.noise_residuals(theta, k)
         r = r[0] / sigma[problem.residual_groups(k)]
         if not ok[0] or not np.all(np.isfinite(r)):
             r = np.full(r.shape, FAILED_RESIDUAL)
@@ -65,7 +67,7 @@ def whitened_jacobian(x: np.ndarray, problem: Problem, sigma: np.ndarray) -> np.
         lanes = np.repeat(x[None], 2 * cols.size, axis=0)
         lanes[np.arange(cols.size), cols] += h[cols]
         lanes[cols.size + np.arange(cols.size), cols] -= h[cols]
-        r, ok = problem.residuals(lanes, k)
+        r, ok = problem.noise_residuals(lanes, k)
         d = (r[: cols.size] - r[cols.size:]) / (2 * h[cols])[:, None] / sigma[problem.residual_groups(k)]
         d[~(ok[: cols.size] & ok[cols.size:])] = 0.0
         J = np.zeros((r.shape[1], n_x))
@@ -177,16 +179,16 @@ def condition_number(J: np.ndarray) -> float:
 
 
 def _rms(problem: Problem, x: np.ndarray) -> np.ndarray:
-    """(n_groups,) residual RMS per noise group at x (1 cm where the simulation failed)."""
+    """(n_groups,) effective residual RMS per noise group at x (5 × nominal where the simulation failed)."""
     out = np.empty(problem.n_groups)
     theta = x[None]
     for k in range(problem.n_flights):
-        r, ok = problem.residuals(theta, k)
+        r, ok = problem.noise_residuals(theta, k)
         g = problem.residual_groups(k)
         ms = np.bincount(g, weights=r[0] ** 2, minlength=problem.n_groups) / np.maximum(
             np.bincount(g, minlength=problem.n_groups), 1)
         groups = problem.flight_groups(k)
-        out[groups] = np.sqrt(ms[groups]) if ok[0] else 5 * problem.nominal_noise[groups]
+        out[groups] = np.sqrt(ms[groups]) if ok[0] and np.all(np.isfinite(ms[groups])) else 5 * problem.nominal_noise[groups]
     return np.maximum(out, 5e-3 * problem.nominal_noise)
 
 

@@ -13,6 +13,12 @@ p(σ_g) ∝ 1/σ_g. For the marker model (one group per flight) σ_f is integrat
 so the sampler explores θ alone (σ and θ are coupled: in ~60 dimensions that coupling alone makes the
 joint posterior far from Gaussian), and σ_f is then drawn exactly from its conditional
 σ_f² | θ, y ~ S_f / χ²_{n_f}: together an exact sample of the joint posterior p(θ, σ | y).
+
+A flight's noise unit may shape or correlate the noise (per-point errors, AR(1) in time:
+:mod:`bayes_disc.observation.models.noise`); then S_f is the *effective* sum of squares S̃_f of the
+whitened residuals (:meth:`ObservationModel.effective_residuals`), and the formula above still holds
+exactly. The sampler's blobs are the S̃_g; :meth:`Problem.draw_sigma` needs θ as well when a unit's
+whitening depends on its parameters (ρ_f).
 """
 from __future__ import annotations
 
@@ -208,13 +214,33 @@ class Problem:
 
     def subset(self, k: int, flight: FlightObservation | None = None) -> "Problem":
         """The problem of flight k alone (optionally with its recording replaced, e.g. a window), with the
-        same model, settings and integration rate."""
+        same model, settings and integration rate; a replaced recording keeps the marker model's noise
+        settings and drops the flight's other channels)."""
+        observations, own = [self.channels[k]], None if not self.own_start else [self.own_start[k]]
+        if flight is not None:
+            marker = next((c for c in self.channels[k] if isinstance(c, MarkerPositions)), None)
+            observations = None if marker is None else [(marker.for_data(flight),)]
+            own = None if marker is None or not self.own_start else [self.own_start[k][: len(marker.parameters)]]
         return Problem(flights=[self.flights[k] if flight is None else flight], marker_body=self.marker_body,
                        disc=self.disc, env=self.env, prior_name=self.prior_name, terms=self.terms,
                        explanations=self.explanations, start_states=[self.start_states[k]],
                        term_start=self.term_start, settings=self.settings, rates=[self.rates[k]],
-                       kernel_terms=self.kernel_terms, observations=None if flight is not None else [self.channels[k]],
-                       own_start=None if not self.own_start else [self.own_start[k]])
+                       kernel_terms=self.kernel_terms, observations=observations, own_start=own)
+
+    def with_marker_data(self, flights: dict) -> "Problem":
+        """The same problem with some flights' marker recordings replaced ({name: FlightObservation} on the
+        same sample grid, e.g. cleaned of outliers): same parameters, starts and noise settings."""
+        unknown = sorted(set(flights) - {f.name for f in self.flights})
+        if unknown:
+            raise KeyError(f"no flight(s) {unknown} in the problem")
+        records = [flights.get(f.name, f) if isinstance(f, FlightObservation) else f for f in self.flights]
+        observations = [tuple(c.for_data(flights[c.flight]) if isinstance(c, MarkerPositions) and c.flight in flights
+                              else c for c in ch) for ch in self.channels]
+        return Problem(flights=records, marker_body=self.marker_body, disc=self.disc, env=self.env,
+                       prior_name=self.prior_name, terms=self.terms, explanations=self.explanations,
+                       start_states=self.start_states, term_start=self.term_start, settings=self.settings,
+                       rates=self.rates, kernel_terms=self.kernel_terms, observations=observations,
+                       own_start=self.own_start)
 
     def start_vector(self) -> np.ndarray:
         """(dim,) prior means with the extension parameters at their starting values."""
@@ -337,14 +363,29 @@ class Problem:
         parts = [c.residuals(p) for c, p in preds]
         return (parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)), ok
 
+    def noise_residuals(self, theta: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Effective residuals ẽ (B, n_res_k) of flight k (every channel's residuals whitened by its noise
+        unit and scaled so that Σ_g ẽ² = S̃_g, :meth:`ObservationModel.effective_residuals`; the residuals
+        themselves for independent noise of one size) and ok flags (B,): least squares fits these."""
+        theta = np.atleast_2d(theta)
+        preds, ok = self.channel_predictions(theta, k)
+        parts = [c.effective_residuals(c.residuals(p), self._extra(theta, k, j)) for j, (c, p) in enumerate(preds)]
+        return (parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)), ok
+
+    def _extra(self, theta: np.ndarray, k: int, j: int) -> np.ndarray | None:
+        """θ columns (B, k) channel j of flight k reads besides the initial conditions (None if none)."""
+        cols = self._columns[k][j]
+        return theta[:, cols] if cols.size else None
+
     def sum_squares(self, theta: np.ndarray) -> np.ndarray:
-        """S_g (B, n_groups): summed squared residuals per noise group; inf where a lane failed."""
+        """S̃_g (B, n_groups): effective summed squared residuals per noise group (the plain sums of squares
+        for independent noise of one size); inf where a lane failed."""
         theta = np.atleast_2d(theta)
         out = np.empty((theta.shape[0], self.n_groups))
         for k in range(self.n_flights):
             preds, ok = self.channel_predictions(theta, k)
-            for (c, p), g in zip(preds, self._groups[k]):
-                ss = c.sum_squares(c.residuals(p))
+            for j, ((c, p), g) in enumerate(zip(preds, self._groups[k])):
+                ss = c.sum_squares(c.effective_residuals(c.residuals(p), self._extra(theta, k, j)))
                 out[:, g] = np.where(ok[:, None] & np.isfinite(ss), ss, np.inf)
         return out
 
@@ -371,12 +412,27 @@ class Problem:
         """Vectorised log-posterior p(θ | y) (θ: (B, dim) → (B,))."""
         return self.log_prob_blobs(theta)[:, 0]
 
-    def draw_sigma(self, ss: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """Noise scales drawn from their exact conditionals given θ, for sums of squares ss (..., n_groups)."""
+    def draw_sigma(self, ss: np.ndarray, rng: np.random.Generator, theta: np.ndarray | None = None) -> np.ndarray:
+        """Noise scales drawn from their exact conditionals given θ.
+
+        Parameters
+        ----------
+        ss : (B, n_groups) array
+            Effective sums of squares S̃_g of B draws (the sampler's blobs).
+        rng : numpy.random.Generator
+        theta : (B, dim) array, optional
+            The draws themselves; required when a noise unit's whitening depends on its parameters (AR(1)).
+
+        Returns
+        -------
+        (B, n_groups) array
+            σ_g in each group's unit.
+        """
         out = np.empty_like(ss)
-        for ch, per in zip(self.channels, self._groups):
-            for c, g in zip(ch, per):
-                out[..., g] = c.draw_noise(ss[..., g], rng)
+        for k, (ch, per) in enumerate(zip(self.channels, self._groups)):
+            for j, (c, g) in enumerate(zip(ch, per)):
+                extra = None if theta is None else self._extra(np.atleast_2d(theta), k, j)
+                out[..., g] = c.draw_noise(ss[..., g], rng, extra)
         return out
 
     def flight_rate(self, state: np.ndarray) -> float:

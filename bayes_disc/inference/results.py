@@ -366,7 +366,9 @@ def pointwise_log_likelihood(problem: Problem, theta: np.ndarray, sigma: np.ndar
     log_lik : ndarray, shape (B, P)
         Log-density [log m⁻³] of each observed marker point (three coordinates; points as in
         :func:`observation_points`); summed over the points of flight f it is the conditional
-        log-likelihood −(3 n_f/2) log(2πσ_f²) − S_f/(2σ_f²).
+        log-likelihood −(3 n_f/2) log(2πσ_f²) − S_f/(2σ_f²) (+ log |W_f| for a shaped or correlated noise
+        unit: each point's density given the flight's earlier points, from its whitened residual e and
+        W's diagonal, :mod:`bayes_disc.observation.models.noise`).
     markers : list of ndarray, shape (B, n_times_f, n_markers, 3)
         Simulated markers [m] of every marker flight (at every sample time, also where unobserved).
     imu_log_lik : ndarray, shape (B, Q)
@@ -384,13 +386,18 @@ def pointwise_log_likelihood(problem: Problem, theta: np.ndarray, sigma: np.ndar
     wanted = {k for k, _ in _marker_flights(problem)} | ({k for k, _ in _inertial_flights(problem)} if inertial else set())
     for k in sorted(wanted):
         preds = [problem.channel_predictions(theta[i: i + BATCH], k)[0] for i in range(0, theta.shape[0], BATCH)]
+        cols = problem.channel_columns(k)
         for j, (c, g) in enumerate(zip(problem.channels[k], problem.channel_groups(k))):
             pred = np.concatenate([p[j][1] for p in preds])
-            r = c.residuals(pred)
+            extra = theta[:, cols[j]] if cols[j].size else None
+            r = c.whiten(c.residuals(pred), extra)
             if not np.all(np.isfinite(r)):
                 raise RuntimeError(f"flight {problem.flights[k].name}: a posterior draw no longer simulates")
             s2 = sigma[:, g][:, c.group_index] ** 2                          # (B, n_res)
             ll = -0.5 * np.log(2 * np.pi * s2) - 0.5 * r * r / s2
+            log_diag = c.log_diagonal(extra)
+            if log_diag is not None:
+                ll = ll + log_diag
             if isinstance(c, MarkerPositions):
                 out.append(ll.reshape(ll.shape[0], -1, 3).sum(axis=2))
                 sims.append(pred)
@@ -465,9 +472,16 @@ def build_inference_data(problem: Problem, chains: Chains, rng: np.random.Genera
     predictive = {}
     for (k, c), m in zip(marker_flights, sims):
         m = m.reshape(n_chain, ll_steps.size, *m.shape[1:])[:, keep]
-        g = problem.channel_groups(k)[problem.channels[k].index(c)].start
-        s = sg_pp[..., g][..., None, None, None]
-        predictive[f"markers_{c.flight}"] = (m + s * rng.standard_normal(m.shape)).astype(np.float32)
+        j = problem.channels[k].index(c)
+        g = problem.channel_groups(k)[j].start
+        if c.noise.white:
+            s = sg_pp[..., g][..., None, None, None]
+            noise = s * rng.standard_normal(m.shape)
+        else:                                   # shaped or correlated noise: the unit draws it
+            cols = problem.channel_columns(k)[j]
+            extra = per_walker[:, pp_steps][..., cols].reshape(-1, cols.size) if cols.size else None
+            noise = c.sample_noise(sg_pp[..., g].reshape(-1), extra, rng).reshape(m.shape)
+        predictive[f"markers_{c.flight}"] = (m + noise).astype(np.float32)
     for (k, c), m in zip(imu_flights, imu_sims):
         m = m.reshape(n_chain, ll_steps.size, *m.shape[1:])[:, keep]
         g = problem.channel_groups(k)[problem.channels[k].index(c)]
@@ -511,10 +525,11 @@ def build_inference_data(problem: Problem, chains: Chains, rng: np.random.Genera
         "each walker as a chain and gives summary.json's r_hat_walkers")
     idata.log_likelihood.attrs["observation"] = (
         "markers: one observed marker point (its x, y, z at one time): log N(y | m(theta), sigma_f^2 I3) with the "
-        "draw's own sigma_f; imu: one gyro or accelerometer value, log N(y | yhat(theta), sigma_g^2); every "
+        "draw's own sigma_f (with per-point errors or AR(1) noise: the point's density given the flight's earlier "
+        "points, log N(e | 0, sigma_f^2 I3) + log|diag W|, e the whitened residual); imu: one gyro or accelerometer value, log N(y | yhat(theta), sigma_g^2); every "
         "walker, evenly spaced kept steps (draw = kept step index)")
     idata.posterior_predictive.attrs["content"] = ("simulated observations + Gaussian noise with the draw's noise "
-                                                   "scales, every walker, evenly spaced kept steps (draw = kept step "
+                                                   "scales (and the flight's noise model: per-point shapes, AR(1)), every walker, evenly spaced kept steps (draw = kept step "
                                                    "index)")
     return idata
 

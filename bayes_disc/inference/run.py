@@ -1,6 +1,8 @@
 """The sampling job of ``bayes-disc sample``: least squares, then emcee.
 
-Writes summary.json, posterior.nc, run_info.json and the least-squares result into the run's output folder.
+Writes summary.json, posterior.nc, run_info.json and the least-squares result into the run's output folder
+(and ``flagged.json``, the points judged outliers and frames judged label-swapped, for ``robust`` marker
+noise: :mod:`.robust`).
 The HTML report is not this module's business: :mod:`bayes_disc.pipeline` runs this job, then the report.
 Progress goes to the module's logger (INFO): a line when each stage starts and one when it ends, with
 its duration (:func:`stage`); a line per least-squares start; a bar over the profile likelihoods and one
@@ -33,6 +35,7 @@ from .inertial import load_run_throws
 from .leastsq import fit_least_squares
 from .results import build_inference_data, build_summary, format_table, prior_record
 from .profile import profile_paths
+from .robust import FLAGGED, robust_flights, robust_refit, with_saved_flags
 from .proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
 from .sampler import n_walkers, run_sampler, saved_steps
 from .versions import software_versions
@@ -98,6 +101,24 @@ def flight_info(problem) -> dict:
     return out
 
 
+def noise_info(problem) -> dict:
+    """Per marker flight: its noise model (:meth:`~bayes_disc.observation.models.noise.MarkerNoise.describe`:
+    ``model``, ``per_point`` (``sigma_m``, ``covariance`` or null), ``reference_sigma_m`` ḡ [m] (σ_f / ḡ is
+    the scale factor of the stated per-point errors) and the unit's own parameters)."""
+    return {f.name: c.noise.describe() for f, ch in zip(problem.flights, problem.channels) for c in ch
+            if isinstance(c, MarkerPositions)}
+
+
+def noise_words(info: dict) -> str:
+    """"flight a: ar1, per-point errors from sigma_m (ḡ = 2.1 mm)" per flight, for the log."""
+    out = []
+    for name, d in info.items():
+        pp = (f", per-point errors from {d['per_point']} (geometric mean {d['reference_sigma_m'] * 1e3:.3g} mm)"
+              if d["per_point"] else ", one σ for every point")
+        out.append(f"{name}: {d['model']}{pp}")
+    return "; ".join(out)
+
+
 def _data_words(problem) -> str:
     """"3 flights, 1200 marker points, 5400 inertial values"."""
     markers = sum(int(c.data.n_points) for ch in problem.channels for c in ch if isinstance(c, MarkerPositions))
@@ -127,9 +148,13 @@ def run_key(cfg: RunConfig, problem) -> dict:
     flights = {name: {k: v for k, v in f.items() if k != "file"} for name, f in flight_info(problem).items()}
     settings = {k: v for k, v in asdict(cfg.sampler).items() if k not in RESUMABLE_SETTINGS}
     settings["walkers"] = n_walkers(cfg.sampler, problem.dim)
-    return json.loads(json.dumps({"parameters": list(problem.names), "flights": flights,
-                                  "markers": cfg.markers, "prior": cfg.prior if isinstance(cfg.prior, str) else prior_record(cfg.prior),
-                                  "sampler": settings}))
+    prior = cfg.prior if isinstance(cfg.prior, str) else prior_record(cfg.prior)
+    key = {"parameters": list(problem.names), "flights": flights, "markers": cfg.markers, "prior": prior,
+           "sampler": settings}
+    noise = noise_info(problem)
+    if any(d["model"] != "gaussian" or d["per_point"] for d in noise.values()):
+        key["noise"] = noise                       # only when not the plain model: older runs still resume
+    return json.loads(json.dumps(key))
 
 
 def check_same_run(cfg: RunConfig, problem, out: Path) -> None:
@@ -209,13 +234,48 @@ def _least_squares(problem, cfg: RunConfig, out: Path):
                 logger.info(f"least squares: start {done}/{total} cost {cost:.1f} ({st.elapsed:.0f} s)")
         ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
                                seed=cfg.sampler.seed, progress=report)
-        ls_dict = ls.to_dict()
-        (out / "least_squares.json").write_text(json.dumps(ls_dict, indent=1))
-        np.save(out / "least_squares_cov.npy", ls.cov)
-        np.save(out / "least_squares_theta.npy", ls.theta)
+        ls_dict = _save_least_squares(ls, out)
         st.result = (f"cost {ls.cost:.1f}, condition number {ls.condition_number:.3g}, RMS "
                      + ", ".join(f"{k} {v:.2f} mm" for k, v in ls_dict["rms_mm"].items()))
     return ls, ls_dict
+
+
+def _save_least_squares(ls, out: Path) -> dict:
+    ls_dict = ls.to_dict()
+    (out / "least_squares.json").write_text(json.dumps(ls_dict, indent=1))
+    np.save(out / "least_squares_cov.npy", ls.cov)
+    np.save(out / "least_squares_theta.npy", ls.theta)
+    return ls_dict
+
+
+def flag_lines(flags: dict) -> list[str]:
+    """One line per flagged point or frame: "a t=0.2083 s marker 1: outlier (p = 0.998)"."""
+    out = []
+    for f in flags.values():
+        out += [f"{o['flight']} t={o['t']:.4f} s marker {o['marker']}: outlier (p = {o['probability']:.3f})"
+                for o in f["outliers"]]
+        out += [f"{w['flight']} t={w['t']:.4f} s markers {w['markers'][0]} and {w['markers'][1]}: labels swapped "
+                f"(p = {w['probability']:.3f})" for w in f["swaps"]]
+    return out
+
+
+def _robust(problem, ls, ls_dict: dict, cfg: RunConfig, out: Path):
+    """For ``robust`` marker noise: judge, clean and refit (:func:`.robust.robust_refit`), write
+    ``flagged.json`` and the refined least-squares files, log every flag."""
+    if not robust_flights(problem):
+        return problem, ls, ls_dict
+    with stage("robust fit", "judging outliers and label swaps, refitting on the cleaned data") as st:
+        def report(i, n_out, n_swap):
+            logger.info(f"robust fit: round {i}: {n_out} outlier(s), {n_swap} swapped frame(s) ({st.elapsed:.0f} s)")
+        problem, ls, flags = robust_refit(problem, ls, max_nfev=cfg.least_squares.max_nfev, progress=report)
+        (out / FLAGGED).write_text(json.dumps(flags, indent=1))
+        for line in flag_lines(flags):
+            logger.info(f"flagged: {line}")
+        ls_dict = _save_least_squares(ls, out)
+        n_out = sum(len(f["outliers"]) for f in flags.values())
+        n_swap = sum(len(f["swaps"]) for f in flags.values())
+        st.result = f"{n_out} outlier(s) removed, {n_swap} swapped frame(s) restored (listed in {out / FLAGGED})"
+    return problem, ls, ls_dict
 
 
 def posterior_approximation(problem, ls, processes: int, out: Path, progress: bool = False):
@@ -309,7 +369,12 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
     with stage("reading flights and checks") as st:
         throws = load_run_throws(cfg) if cfg.imu else []
         problem = build_problem(cfg, throws=throws)
+        if resume and robust_flights(problem) and (out / FLAGGED).is_file() and (out / "chains" / RUN_KEY).is_file():
+            problem = with_saved_flags(problem, out)
+            logger.info(f"resume: the saved judgement of outliers and label swaps ({out / FLAGGED}) is applied")
         st.result = f"{cfg.name}: {_data_words(problem)}, {problem.dim} parameters"
+        if noise_info(problem):
+            logger.info(f"marker noise: {noise_words(noise_info(problem))}")
         for t in throws:
             if t.status != "ok":
                 logger.info(f"{t.name}: {t.status}: {t.reason}")
@@ -332,6 +397,7 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
         proposal = None  # the sampler continues with the approximation saved beside its chains
     else:
         ls, ls_dict = _least_squares(problem, cfg, out)
+        problem, ls, ls_dict = _robust(problem, ls, ls_dict, cfg, out)
         proposal = posterior_approximation(problem, ls, cfg.sampler.processes, out, progress=progress)
         (out / "chains").mkdir(exist_ok=True)
         (out / "chains" / RUN_KEY).write_text(json.dumps(run_key(cfg, problem), indent=1))
@@ -342,7 +408,11 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
         st.result = f"{chains.reason} at step {chains.total_steps}"
     with stage("outputs", "summary.json, posterior.nc, run_info.json"):
         info = {"name": cfg.name, "config": str(cfg.path), "flights": flight_info(problem),
-                "sampler_settings": asdict(cfg.sampler), "markers": cfg.markers}
+                "sampler_settings": asdict(cfg.sampler), "markers": cfg.markers, "noise": noise_info(problem)}
+        if (out / FLAGGED).is_file() and robust_flights(problem):
+            flags = json.loads((out / FLAGGED).read_text())
+            info["flagged"] = {"file": FLAGGED, "outliers": sum(len(f["outliers"]) for f in flags.values()),
+                               "swaps": sum(len(f["swaps"]) for f in flags.values())}
         if throws:
             info["inertial_throws"] = {t.name: t.to_dict() for t in throws}
         idata = build_inference_data(problem, chains, np.random.default_rng(cfg.sampler.seed))

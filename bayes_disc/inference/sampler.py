@@ -526,8 +526,8 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
         raise RuntimeError(f"{chain_dir}: ensembles of unequal length {sorted(lengths)} after sampling")
     # no convergence check (the cap came during the warm-up): the warm-up is burn-in, at most half the chain
     burn = verdict["burn"] if checked is not None else min(adapt_at[-1], chain.shape[1] // 2)
-    sigma = problem.draw_sigma(ss[:, burn:].reshape(-1, problem.n_groups),
-                               np.random.default_rng(settings.seed)).reshape(ss[:, burn:].shape)
+    sigma = problem.draw_sigma(ss[:, burn:].reshape(-1, problem.n_groups), np.random.default_rng(settings.seed),
+                               chain[:, burn:].reshape(-1, problem.dim)).reshape(ss[:, burn:].shape)
     reason = ("converged" if verdict["converged"] else
               f"cap of {settings.max_steps} steps reached before convergence")
     hist_path.write_text(json.dumps(history, indent=1))

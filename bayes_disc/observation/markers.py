@@ -1,7 +1,9 @@
 """Marker data files (SPEC §4): read with validation, write, and arrange per flight.
 
 CSV, one row per marker per sample, header ``flight,t,marker,x,y,z`` (extra columns allowed, e.g. a
-per-point standard deviation ``sigma_m``). World-frame positions in metres, time in seconds, increasing
+per-point standard deviation ``sigma_m`` [m] or the per-point covariance ``cov_xx, cov_xy, cov_xz, cov_yy,
+cov_yz, cov_zz`` [m²] written by ``bayes-disc track``; the marker noise models use them,
+:mod:`bayes_disc.observation.models.noise`). World-frame positions in metres, time in seconds, increasing
 within a flight. A missing observation is a missing row or NaN coordinates. Anything else is rejected
 with a :class:`MarkerFileError` naming the file, the line and the problem; nothing is dropped or reordered.
 """
@@ -19,6 +21,10 @@ import numpy as np
 from .config_io import TextDecodeError, read_text
 
 REQUIRED_COLUMNS = ("flight", "t", "marker", "x", "y", "z")
+#: per-point covariance columns [m²] (upper triangle, row-major), as ``bayes-disc track`` writes them
+COV_COLUMNS = ("cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz")
+#: matrix entry of each covariance column
+COV_INDEX = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 #: marker spacing above this (m) on one disc means the file is not in metres
 MAX_MARKER_SPACING_M = 2.0
 #: coordinates above this (m) are not a disc flight in metres
@@ -59,6 +65,7 @@ class FlightObservation:
     """One flight on its sample grid: times (n,), positions (n, n_markers, 3) with NaN where missing.
 
     ``sigma`` (n, n_markers) holds per-point standard deviations [m] when the file gave ``sigma_m``;
+    ``cov`` (n, n_markers, 3, 3) per-point covariances [m²] when it gave all of :data:`COV_COLUMNS`;
     ``line`` is the 1-based line of the flight's first row in ``source`` when read from a file.
     """
 
@@ -69,6 +76,7 @@ class FlightObservation:
     positions: np.ndarray
     sigma: np.ndarray | None = None
     line: int | None = None
+    cov: np.ndarray | None = None
 
     @property
     def observed(self) -> np.ndarray:
@@ -86,7 +94,8 @@ class FlightObservation:
         if t_end is not None:
             keep &= self.times <= t_end
         return FlightObservation(self.name, self.source, self.times[keep], self.marker_ids,
-                                 self.positions[keep], None if self.sigma is None else self.sigma[keep], self.line)
+                                 self.positions[keep], None if self.sigma is None else self.sigma[keep], self.line,
+                                 None if self.cov is None else self.cov[keep])
 
 
 def _float(text: str, path, line: int, column: str) -> float:
@@ -394,6 +403,10 @@ def flights_from_table(table: MarkerTable, marker_ids, source: str = "") -> list
         raise KeyError(f"marker id(s) {unknown} not among {list(marker_ids)}")
     k_all = np.fromiter((col[str(m)] for m in table.marker.tolist()), np.int64, len(table))
     sigma_col = table.extra.get("sigma_m")
+    have_cov = [c for c in COV_COLUMNS if c in table.extra]
+    if have_cov and len(have_cov) < len(COV_COLUMNS):
+        raise MarkerFileError(source or "<table>", 1, f"covariance column(s) {sorted(set(COV_COLUMNS) - set(have_cov))} "
+                              f"missing (given: {have_cov}; all of {', '.join(COV_COLUMNS)} or none)")
     out = []
     for name, rows in group_rows(table.flight):
         times = np.unique(table.t[rows])
@@ -404,9 +417,16 @@ def flights_from_table(table: MarkerTable, marker_ids, source: str = "") -> list
         if sigma_col is not None:
             sig = np.full((times.size, len(marker_ids)), np.nan)
             sig[ti, k_all[rows]] = np.asarray(sigma_col[rows], float)
+        cov = None
+        if have_cov:
+            cov = np.full((times.size, len(marker_ids), 3, 3), np.nan)
+            for c, (i, j) in zip(COV_COLUMNS, COV_INDEX):
+                v = np.asarray(table.extra[c][rows], float)
+                cov[ti, k_all[rows], i, j] = v
+                cov[ti, k_all[rows], j, i] = v
         line = None if table.lines is None else int(table.lines[rows[0]])
         out.append(FlightObservation(name=name, source=source, times=times, marker_ids=marker_ids,
-                                     positions=pos, sigma=sig, line=line))
+                                     positions=pos, sigma=sig, line=line, cov=cov))
     return out
 
 

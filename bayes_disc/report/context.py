@@ -167,9 +167,10 @@ class ReportContext:
         from ..inference.data import build_problem
         from ..observation.config_io import ConfigError
         from ..observation.markers import MarkerFileError
+        from ..inference.robust import with_saved_flags
         try:
-            problem = build_problem(self.config)
-        except (ConfigError, MarkerFileError) as e:
+            problem = with_saved_flags(build_problem(self.config), self.run.run_dir)   # robust runs: cleaned data
+        except (ConfigError, MarkerFileError, FileNotFoundError) as e:
             raise ReportInputError(self.run.config_path, f"cannot rebuild the run's data: {e}") from None
         from ..inference.run import flight_info
         strip = lambda d: {k: {a: b for a, b in v.items() if a != "file"} for k, v in d.items()}  # noqa: E731

@@ -29,9 +29,8 @@ from .footage import open_source
 from .identity import FrameLabels, IdentityConfig, Tracker, label_frame, layout_distinctness
 from .imports import FORMATS, DEFAULT_CONVENTION, read_xypts, read_xyzpts, reprojection_check
 from .triangulation import triangulate
+from ..observation.markers import COV_COLUMNS, COV_INDEX
 
-COV_COLUMNS = ("cov_xx", "cov_xy", "cov_xz", "cov_yy", "cov_yz", "cov_zz")
-_COV_INDEX = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
 @dataclass
@@ -111,7 +110,7 @@ class TrackResult:
         F, M = self.xyz.shape[:2]
         extra = {"reproj_rms_px": self.rms_px.reshape(-1).astype(float),
                  "n_views": self.n_views.reshape(-1).astype(int)}
-        for name, (i, j) in zip(COV_COLUMNS, _COV_INDEX):
+        for name, (i, j) in zip(COV_COLUMNS, COV_INDEX):
             extra[name] = self.cov[:, :, i, j].reshape(-1).astype(float)
         return MarkerTable(flight=np.full(F * M, self.flight, dtype=object), t=np.repeat(self.times, M),
                            marker=np.tile(np.array(self.marker_ids, dtype=object), F),

@@ -8,7 +8,18 @@ vectors whose simulated trajectories are given:
 * ``group_index`` (n_res,): the noise group of each residual (entries sharing one noise scale σ_g);
 * ``log_likelihood(ss)``: log p(y | θ) from the per-group sums of squared residuals S_g (B, n_groups),
   with each σ_g integrated out under its Jeffreys prior p(σ_g) ∝ 1/σ_g (:func:`gaussian_marginal_loglik`);
-* ``draw_noise(ss, rng)``: σ_g drawn exactly from σ_g² | θ, y ~ S_g / χ²_{n_g}.
+* ``draw_noise(ss, rng, extra)``: σ_g drawn exactly from σ_g² | θ, y ~ S_g / χ²_{n_g}.
+
+Correlated or unequal noise (residuals r ~ N(0, σ_g² C_g(φ)), φ the model's own parameters) enters through
+a lower-triangular whitening map W with W C Wᵀ = I: ``whiten(residuals, extra)`` gives e = W r
+(independent N(0, σ_g²)), ``log_diagonal(extra)`` the log of W's diagonal per residual and ``log_det(extra)``
+(B, n_groups) the part of log |W| that depends on θ. Integrating σ_g out,
+
+    p(y_g | θ) = |W_g| · ½ Γ(n_g/2) (π S_g)^(−n_g/2) = ½ Γ(n_g/2) (π S̃_g)^(−n_g/2),   S̃_g = |W_g|^(−2/n_g) S_g,
+
+so the contract holds with the *effective* sums of squares S̃_g (:meth:`ObservationModel.effective_residuals`:
+e scaled by |W_g|^(−1/n_g), Σ ẽ² = S̃_g). With no such map (the default) ẽ = r, S̃ = S. ``draw_noise``
+then undoes the scaling: σ_g² = |W_g|^(2/n_g) S̃_g / χ²_{n_g}.
 
 Optionally (diagnostics and the report) ``residual_series(trajectories, extra, prediction, conditions)``:
 the model's residuals as named (n,) series in physical directions, with their standard errors per unit
@@ -187,6 +198,29 @@ class ObservationModel(ABC):
         """
         raise NotImplementedError(f"observation model {self.id!r} gives no residual series")
 
+    def whiten(self, residuals: np.ndarray, extra: np.ndarray | None) -> np.ndarray:
+        """e = W r (B, n_res): residuals whitened to independent N(0, σ_g²) (module docstring); the
+        default W = I returns ``residuals`` itself. ``extra`` as for :meth:`predict`."""
+        return residuals
+
+    def log_diagonal(self, extra: np.ndarray | None) -> np.ndarray | None:
+        """(B or 1, n_res) log of W's diagonal entry of each residual (pointwise log-Jacobian), None for W = I."""
+        return None
+
+    def log_det(self, extra: np.ndarray | None) -> np.ndarray | None:
+        """(B, n_groups) the part of log |W_g| that depends on θ; None when there is none."""
+        return None
+
+    def effective_residuals(self, residuals: np.ndarray, extra: np.ndarray | None) -> np.ndarray:
+        """ẽ (B, n_res): whitened residuals scaled by |W_g|^(−1/n_g), so that Σ_g ẽ² = S̃_g and
+        p(y | θ) = :func:`gaussian_marginal_loglik` (S̃) exactly (module docstring); ``residuals`` itself
+        when W = I."""
+        e = self.whiten(residuals, extra)
+        ld = self.log_det(extra)
+        if ld is None:
+            return e
+        return e * np.exp(-ld / self.group_sizes)[:, self.group_index]
+
     def sum_squares(self, residuals: np.ndarray) -> np.ndarray:
         """(B, n_groups) sums of squared residuals per noise group."""
         G = len(self.noise_names)
@@ -202,6 +236,31 @@ class ObservationModel(ABC):
         """(B,) log p(y | θ) with every σ_g integrated out (Jeffreys prior), from ss (B, n_groups)."""
         return gaussian_marginal_loglik(ss, self.group_sizes)
 
-    def draw_noise(self, ss: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """σ_g drawn from σ_g² | θ, y ~ S_g / χ²_{n_g}; ss (..., n_groups) → (..., n_groups)."""
-        return np.sqrt(ss / rng.chisquare(self.group_sizes, size=ss.shape))
+    def draw_noise(self, ss: np.ndarray, rng: np.random.Generator, extra: np.ndarray | None = None) -> np.ndarray:
+        """σ_g drawn from σ_g² | θ, y ~ S_g / χ²_{n_g}, S_g = |W_g|^(2/n_g) S̃_g.
+
+        Parameters
+        ----------
+        ss : (B, n_groups) array
+            Effective sums of squares S̃_g (the sampler's blobs).
+        rng : numpy.random.Generator
+        extra : (B, k) array, optional
+            The model's parameters of each draw (as for :meth:`predict`); needed when :meth:`log_det`
+            depends on them.
+
+        Returns
+        -------
+        (B, n_groups) array
+            σ_g in the data's unit.
+        """
+        sigma = np.sqrt(ss / rng.chisquare(self.group_sizes, size=ss.shape))
+        if not self.log_det_depends_on_parameters:
+            return sigma
+        if extra is None:
+            raise ValueError(f"observation model {self.id!r}: drawing σ needs each draw's parameter values (extra)")
+        return sigma * np.exp(self.log_det(extra) / self.group_sizes)
+
+    @property
+    def log_det_depends_on_parameters(self) -> bool:
+        """Whether :meth:`log_det` depends on the model's own parameters (then σ draws need them)."""
+        return False

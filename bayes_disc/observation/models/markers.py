@@ -7,8 +7,10 @@ Marker j of a flight is predicted at sample time t as
 x the centre of mass [m], R the body-to-world rotation, b_j the configured body position [m]; the body
 offsets Δ_j [m] and timing offsets δ_j [s] are the data explanations ``marker_geometry`` and
 ``time_offset`` (:mod:`bayes_disc.observation.explanations`; zero unless the model includes them).
-Every observed coordinate is y = m + ε, ε ~ N(0, σ_f²) independent, with one noise scale σ_f [m] per
-flight (public name ``sigma_<flight>``), prior p(σ_f) ∝ 1/σ_f, integrated out analytically.
+Every observed coordinate is y = m + ε with one noise scale σ_f [m] per flight (public name
+``sigma_<flight>``), prior p(σ_f) ∝ 1/σ_f, integrated out analytically. By default ε ~ N(0, σ_f²)
+independent; the flight's noise unit (:mod:`.noise`: per-point errors, AR(1) in time) may shape and
+correlate it, whitening the residuals and adding its own per-flight parameters (e.g. ``rho_<flight>``).
 
 Residual series (diagnostics): the residuals r = measured − predicted [m] are averaged over the markers
 seen at each sample (r̄(t), standard error σ/√n_seen per component) and projected on two frames:
@@ -32,6 +34,7 @@ import numpy as np
 from ..explanations import DataExplanation, predicted_markers
 from ..markers import FlightObservation
 from .base import ObservationModel, ResidualSeries
+from .noise import MarkerNoise, marker_noise
 
 #: the translation series of the marker model [m]
 DIRECTIONS = ("along", "lateral", "normal", "d1", "d2", "d3")
@@ -133,15 +136,23 @@ class MarkerPositions(ObservationModel):
         Configured body-frame marker positions b_j [m], in the order of ``data.marker_ids``.
     explanations : tuple of DataExplanation
         Data explanations applied to the prediction, in parameter-layout order.
+    noise_model : {"gaussian", "ar1"}
+        The flight's noise unit (:mod:`.noise`).
+    per_point : {"auto", "true", "false"}
+        Per-point errors from ``sigma_m`` or the covariance columns (``auto``: when the file has them).
     """
 
     id = "markers"
     title = "3-D marker positions"
-    equations = "m_j(t) = x(t + δ_j) + R(t + δ_j)(b_j + Δ_j);  y = m + ε,  ε ~ N(0, σ_f² I)  [m]"
+    equations = ("m_j(t) = x(t + δ_j) + R(t + δ_j)(b_j + Δ_j);  y = m + ε,  ε ~ N(0, σ_f² C)  [m],  C from the "
+                 "flight's noise unit (I by default; :mod:`.noise`)")
 
     data: FlightObservation
     marker_body: np.ndarray
     explanations: tuple[DataExplanation, ...] = ()
+    noise_model: str = "gaussian"
+    per_point: str = "auto"
+    noise: MarkerNoise = field(init=False, repr=False)
     _mask: np.ndarray = field(init=False, repr=False)
     _obs: np.ndarray = field(init=False, repr=False)
 
@@ -151,6 +162,39 @@ class MarkerPositions(ObservationModel):
         self._mask = self.data.observed
         self._obs = self.data.positions[self._mask]
         self._groups = np.zeros(3 * int(self._mask.sum()), dtype=np.intp)
+        self.noise = marker_noise(self.data, self.noise_model, self.per_point)
+
+    def for_data(self, data: FlightObservation) -> "MarkerPositions":
+        """The same model (explanations, noise settings) for other data of the flight (e.g. a window)."""
+        return MarkerPositions(data, self.marker_body, self.explanations, self.noise_model, self.per_point)
+
+    @property
+    def parameters(self):
+        """The noise unit's own parameters (e.g. ``rho`` of AR(1) noise)."""
+        return self.noise.parameters
+
+    def _own(self, extra: np.ndarray | None) -> np.ndarray | None:
+        k = len(self.noise.parameters)
+        return extra[:, extra.shape[1] - k:] if k else None
+
+    def whiten(self, residuals, extra):
+        return self.noise.whiten(residuals, self._own(extra))
+
+    def log_diagonal(self, extra):
+        return self.noise.log_diagonal(self._own(extra))
+
+    def log_det(self, extra):
+        ld = self.noise.log_det(self._own(extra))
+        return None if ld is None else ld[:, None]
+
+    @property
+    def log_det_depends_on_parameters(self) -> bool:
+        return bool(self.noise.parameters)
+
+    def sample_noise(self, sigma: np.ndarray, extra: np.ndarray | None, rng: np.random.Generator) -> np.ndarray:
+        """Noise draws (B, n, n_markers, 3) [m] on the whole sample grid for the flight's σ_f (B,) and the
+        model's parameters ``extra`` (B, k) (:meth:`.noise.MarkerNoise.sample`)."""
+        return self.noise.sample(sigma, self._own(extra), rng)
 
     @property
     def explanation_ids(self) -> tuple[str, ...]:

@@ -1,0 +1,130 @@
+"""The ``robust`` noise model's fit: judge gross errors, clean, refit, until the judgement is stable.
+
+For every flight whose marker noise is ``robust`` (:class:`~bayes_disc.observation.models.noise.RobustNoise`)
+the points and frames of the recording as given are judged at the current least-squares optimum by the
+inlier/outlier and label-swap mixture of :mod:`bayes_disc.observation.models.outliers`, with each point's
+inlier scale σ_i = σ̂_f c_i: c_i the point's stated error relative to the flight's typical one (1 without
+per-point errors) and σ̂_f the robust scale √(median_i |r_i / c_i|² / 2.366) (2.366: the median of χ²₃),
+so that the gross errors being judged do not inflate it. Outlying points are removed and swapped labels
+restored (:func:`~bayes_disc.observation.models.outliers.clean_flight`), the fit is refined on the cleaned
+data, and this is repeated until the flags no longer change (at most :data:`MAX_ROUNDS` times).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import chi2
+
+from ..observation.models import MarkerPositions
+from ..observation.models.noise import RobustNoise
+from ..observation.models.outliers import Classification, classify, clean_flight
+from .leastsq import LeastSquaresResult, refine_least_squares
+from .model import Problem
+
+#: the judgement a run wrote (in its output folder)
+FLAGGED = "flagged.json"
+#: most judge–clean–refit rounds
+MAX_ROUNDS = 5
+_CHI2_3_MEDIAN = float(chi2.median(3))
+
+
+def robust_flights(problem: Problem) -> list[tuple[int, MarkerPositions]]:
+    """(flight index, marker model) of the flights with ``robust`` marker noise."""
+    return [(k, c) for k, ch in enumerate(problem.channels) for c in ch if isinstance(c, MarkerPositions)
+            and isinstance(c.noise, RobustNoise)]
+
+
+def point_scales(model: MarkerPositions) -> np.ndarray:
+    """(n, m) c_i: each observation's stated error relative to the flight's typical one (1 without them;
+    with a covariance, the geometric mean of its Cholesky diagonal), NaN where unseen."""
+    out = np.full(model.data.observed.shape, np.nan)
+    ld = model.noise.log_diagonal(None)
+    out[model.data.observed] = 1.0 if ld is None else np.exp(-ld.reshape(-1, 3).mean(axis=1))
+    return out
+
+
+def judge(problem: Problem, theta: np.ndarray, k: int, model: MarkerPositions, data) -> Classification:
+    """The mixture's judgement of flight k's recording ``data`` (as given) at θ (:func:`classify`)."""
+    pred, ok = problem.predict(theta[None], k)
+    if not ok[0]:
+        raise RuntimeError(f"flight {data.name!r}: the fit no longer simulates; cannot judge outliers")
+    c = point_scales(model)
+    seen = data.observed
+    r2 = np.sum((pred[0] - data.positions) ** 2, axis=-1)[seen] / c[seen] ** 2
+    sigma = np.sqrt(np.median(r2) / _CHI2_3_MEDIAN)
+    return classify(data.name, data.times, data.marker_ids, pred[0], data.positions, sigma * c)
+
+
+def robust_refit(problem: Problem, ls: LeastSquaresResult, max_nfev: int = 200, progress=None):
+    """Judge, clean and refit until the flags are stable (module docstring).
+
+    Parameters
+    ----------
+    problem : Problem
+        The run's problem on the data as recorded.
+    ls : LeastSquaresResult
+        Its least-squares optimum.
+    max_nfev : int
+        Evaluation budget of each refinement.
+    progress : callable, optional
+        ``progress(round, n_outliers, n_swaps)`` after each judgement.
+
+    Returns
+    -------
+    problem : Problem
+        On the cleaned data.
+    ls : LeastSquaresResult
+        Its optimum.
+    flags : dict
+        {flight: :meth:`Classification.records`} of the last judgement.
+    """
+    flights = robust_flights(problem)
+    if not flights:
+        return problem, ls, {}
+    current, previous, flags = problem, None, {}
+    for i in range(MAX_ROUNDS):
+        flags = {c.flight: judge(current, ls.theta, k, c, c.data).records() for k, c in flights}
+        if progress is not None:
+            progress(i + 1, sum(len(f["outliers"]) for f in flags.values()), sum(len(f["swaps"]) for f in flags.values()))
+        if flags == previous:
+            break
+        current = problem.with_marker_data({c.flight: clean_flight(c.data, flags[c.flight]) for _, c in flights})
+        ls = refine_least_squares(current, ls.theta, max_nfev=max_nfev)
+        previous = flags
+    return current, ls, flags
+
+
+def apply_flags(problem: Problem, flags: dict) -> Problem:
+    """The problem with saved flags (``flagged.json``) applied to its robust flights' recordings (resume)."""
+    return problem.with_marker_data({c.flight: clean_flight(c.data, flags.get(c.flight, {}))
+                                     for _, c in robust_flights(problem)})
+
+
+def with_saved_flags(problem: Problem, run_dir) -> Problem:
+    """The problem a finished (or interrupted) run sampled: its robust flights cleaned as the run's
+    ``flagged.json`` says (unchanged without robust flights).
+
+    Parameters
+    ----------
+    problem : Problem
+        Rebuilt from the run's configuration (data as recorded).
+    run_dir : str or Path
+        The run's output folder.
+
+    Returns
+    -------
+    Problem
+
+    Raises
+    ------
+    FileNotFoundError
+        If the problem has robust flights but the folder has no ``flagged.json``.
+    """
+    if not robust_flights(problem):
+        return problem
+    path = Path(run_dir) / FLAGGED
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: missing; the run's robust flights were cleaned as it lists (re-run sample)")
+    return apply_flags(problem, json.loads(path.read_text()))
