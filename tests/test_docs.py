@@ -34,6 +34,7 @@ def _normalise(key: str) -> str:
     """Concrete key → documented form: list indices, marker ids and flight names become placeholders."""
     key = re.sub(r"\[\d+\]", "[]", key)
     key = re.sub(r"mk\d", "<id>", key)
+    key = re.sub(r"^prior\.sd\.\w+$", "prior.sd.<coefficient>", key)
     return key.replace(f"flight_options.{FLIGHT}.", "flight_options.<flight>.")
 
 
@@ -48,8 +49,6 @@ def accepted_keys(tmp_path: Path) -> dict:
            "markers": {m: [0.1 * i, 0.0, -0.015] for i, m in enumerate(MARKER_IDS)},
            "physics": physics, "flight_options": {FLIGHT: {"t_start": 0.0}}, "truth": "truth.json",
            "imu": [{"file": "log.csv", "format": "imu-csv", "throws": [[0, 100]]}]}
-    path = tmp_path / "config.yaml"
-    path.write_text(yaml.safe_dump(cfg))
     seen: dict = {}
     original = config_io.Section.raw
 
@@ -57,9 +56,13 @@ def accepted_keys(tmp_path: Path) -> dict:
         seen.setdefault(self.key(name), REQUIRED if required else default)
         return original(self, name, default, required)
 
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(config_io.Section, "raw", recording)
-        load_config(path)
+    # the prior's two forms: a named set, and the mapping {around, relative_sd, sd}
+    for i, prior in enumerate(("potts_crowther", {"around": "hummel2002", "sd": {"CNr": 1e-5}})):
+        path = tmp_path / f"config{i}.yaml"
+        path.write_text(yaml.safe_dump(cfg | {"prior": prior}))
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(config_io.Section, "raw", recording)
+            load_config(path)
     return {_normalise(k): v for k, v in seen.items()}
 
 

@@ -3,6 +3,7 @@ browser, with every section present and every figure written as PNG and PDF."""
 import base64
 import io
 import json
+import re
 import shutil
 import subprocess
 from html.parser import HTMLParser
@@ -107,8 +108,8 @@ def test_report_written_where_expected(tiny):
 
 
 #: sections of a marker run without diagnosis.json (the missing-physics section is left out, not a
-#: placeholder; the inertial section only appears with inertial data)
-TINY_SECTIONS = [i for i in DEFAULT_SECTION_IDS if i not in ("missing-physics", "inertial")]
+#: placeholder; the inertial section only appears with inertial data, the flagged one with robust noise)
+TINY_SECTIONS = [i for i in DEFAULT_SECTION_IDS if i not in ("missing-physics", "inertial", "flagged")]
 
 
 def test_html_parses_with_every_section_and_guide(tiny):
@@ -380,6 +381,21 @@ def test_identifiability_section_says_why_no_next_throw_was_ranked(tiny, tmp_pat
     from bayes_disc.report import content
     sec = build_sections(ReportContext(run, tmp_path / "figs"), [content.identifiability_section])[0]
     assert "<h3>Next throw</h3>" in sec.html and why in sec.html and "ln volume gain" not in sec.html
+
+def test_flagged_points_and_swapped_frames_are_listed(tiny, tmp_path):
+    """Robust runs (flagged.json): counts per flight, every outlier and swap with its time and probability;
+    runs without it have no such section."""
+    from bayes_disc.report import content
+    run = load_run(tiny["run"])
+    assert content.flagged_section(ReportContext(run, tmp_path / "f0")) is None
+    run.extras["flagged"] = {
+        "outliers": [{"flight": "a", "t": 0.125, "marker": "1", "probability": 0.999},
+                     {"flight": "b", "t": 0.5, "marker": "0", "probability": 0.97}],
+        "swaps": [{"flight": "a", "t": 0.25, "markers": ["0", "2"], "probability": 0.99}]}
+    sec = build_sections(ReportContext(run, tmp_path / "f1"), [content.flagged_section])[0]
+    assert sec.id == "flagged" and "0 ↔ 2" in sec.html and "0.1250" in sec.html and "0.970" in sec.html
+    assert re.search(r"<td>a</td><td[^>]*>1</td><td[^>]*>1</td>", sec.html), sec.html
+    assert re.search(r"<td>b</td><td[^>]*>1</td><td[^>]*>0</td>", sec.html), sec.html
 
 def test_diagnosis_adds_its_section_with_before_after_figure(tiny, tmp_path):
     """`diagnose` on a sampled run folder rebuilds the report with the missing-physics section filled in."""

@@ -17,10 +17,10 @@ def default_builders() -> list[SectionBuilder]:
         :class:`~.context.ReportContext` to a :class:`~.sections.Section` or None.
     """
     return [answer_section, content.coefficient_table, content.corner_section, content.convergence_section,
-            content.residual_section, content.flight_section, inertial_section, content.force_curve_section,
+            content.residual_section, content.flagged_section, content.flight_section, inertial_section, content.force_curve_section,
             content.identifiability_section, content.missing_physics_section, content.appendix_section]
 
 
 #: section ids of :func:`default_builders`, in order
-DEFAULT_SECTION_IDS = ("answer", "coefficients", "corner", "convergence", "residuals", "flights", "inertial",
-                       "force-curves", "identifiability", "missing-physics", "appendix")
+DEFAULT_SECTION_IDS = ("answer", "coefficients", "corner", "convergence", "residuals", "flagged", "flights",
+                       "inertial", "force-curves", "identifiability", "missing-physics", "appendix")

@@ -511,3 +511,36 @@ def missing_physics_section(ctx) -> Section | None:
              for c in cands]))
     fig = _diagnosis_figure(ctx, data)
     return Section("missing-physics", "Missing physics", guide, "".join(parts), [fig] if fig else [])
+
+
+#: most flagged points and frames listed per table (all are in flagged.json)
+MAX_FLAG_ROWS = 40
+
+
+def flagged_section(ctx) -> Section | None:
+    """Points judged gross outliers and frames judged label-swapped by the ``robust`` noise model
+    (``flagged.json``); None for runs without robust flights."""
+    data = ctx.run.extras.get("flagged")
+    if not data:
+        return None
+    outliers, swaps = data.get("outliers", []), data.get("swaps", [])
+    guide = ("Recorded points the robust noise model judged gross errors (removed before sampling) and frames "
+             "whose marker labels it judged exchanged (restored), each with its probability at the "
+             "least-squares optimum. The posterior is conditional on this judgement.")
+    flights = sorted({r["flight"] for r in outliers} | {r["flight"] for r in swaps})
+    counts = table(["flight", "outlying points", "swapped frames"],
+                   [[f, sum(r["flight"] == f for r in outliers), sum(r["flight"] == f for r in swaps)]
+                    for f in flights] or [["–", 0, 0]], "num")
+    parts = [counts]
+    if outliers:
+        more = f" (first {MAX_FLAG_ROWS} of {len(outliers)}; all in flagged.json)" if len(outliers) > MAX_FLAG_ROWS else ""
+        parts.append(f"<h3>Outlying points{more}</h3>" + table(
+            ["flight", "t [s]", "marker", "probability"],
+            [[r["flight"], f"{r['t']:.4f}", r["marker"], f"{r['probability']:.3f}"] for r in outliers[:MAX_FLAG_ROWS]]))
+    if swaps:
+        more = f" (first {MAX_FLAG_ROWS} of {len(swaps)}; all in flagged.json)" if len(swaps) > MAX_FLAG_ROWS else ""
+        parts.append(f"<h3>Label-swapped frames{more}</h3>" + table(
+            ["flight", "t [s]", "markers exchanged", "probability"],
+            [[r["flight"], f"{r['t']:.4f}", " ↔ ".join(map(str, r["markers"])), f"{r['probability']:.3f}"]
+             for r in swaps[:MAX_FLAG_ROWS]]))
+    return Section("flagged", "Data judged bad", guide, "".join(parts))
