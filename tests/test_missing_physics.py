@@ -195,7 +195,7 @@ def test_no_false_alarms_over_ten_seeds(tmp_path):
 
 @pytest.mark.slow
 def test_gust_is_located_and_reported_unexplained(tmp_path):
-    """A 4 m/s side gust hits flight a from 0.35 to 0.6 s: no library term may claim it."""
+    """A 4 m/s side gust hits flight a from 0.35 to 0.6 s: no library term may claim it, nor correlated noise."""
     gust = {"t_start": 0.35, "t_end": 0.6, "wind": [0.0, 4.0, 0.0]}
     result = diagnose(make_run(tmp_path, {}, seed=3, gust=gust))
     assert result["verdict"] == "missing_physics"
@@ -205,6 +205,8 @@ def test_gust_is_located_and_reported_unexplained(tmp_path):
     assert 0.2 < u["model_follows_until_s"] < 0.6
     assert "Unexplained: flight a" in result["words"]
     assert all(abs(v / NOISE_MM - 1) < 0.15 for f, v in result["rms_before_mm"].items() if f != "a")
+    # correlated noise is tried and absorbs part of the gust (ρ → 1), but whitens nothing: not the explanation
+    assert result["noise"]["model"] == "white" and result["noise"]["ar1_explains"] is False, result["noise"]
 
 
 @pytest.mark.slow

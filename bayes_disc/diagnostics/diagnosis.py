@@ -13,6 +13,15 @@ Writes into the run's output folder:
   ``{k}_times_{name}`` [s], and ``{k}_times`` (the flight's first observation model's times);
 * ``diagnosis_refit/``: the resampled run with the accepted terms (unless ``sample=False``).
 
+Correlated noise or missing physics? When the diagnosis with white marker noise leaves structure that no
+term explains in a flight with markers, the marker noise is made AR(1) (``noise.model: ar1``, ρ_f per
+flight) and the base model refitted (:func:`correlated_noise`). If AR(1) earns its place —
+ΔBIC = Σ_g n_g ln(S_g,white / S̃_g,AR(1)) − k ln N > ``EVIDENCE_THRESHOLD`` with k the number of ρ_f and S̃
+the effective sums of squares of the whitened residuals — the candidates are judged again under it (their
+evidence with AR(1) noise, whiteness of the AR(1) innovations), and ``diagnosis.json`` says so under
+``noise`` (``model``, ``rho`` per flight, ``evidence``): "noise correlated, ρ = 0.85; no missing physics"
+when nothing is left, or the terms found under correlated noise.
+
 The HTML report (which includes the diagnosis) is built by :mod:`bayes_disc.pipeline`, not here.
 """
 from __future__ import annotations
@@ -28,7 +37,7 @@ import numpy as np
 from ..inference.config import RunConfig
 from ..inference.data import build_problem, load_run_flights
 from ..inference.inertial import load_run_throws
-from ..inference.leastsq import fit_least_squares
+from ..inference.leastsq import fit_least_squares, refine_least_squares
 from ..inference.run import RESULT, run_sample
 from ..observation.registry import unit
 from ..physics import COEFFICIENT_NAMES
@@ -136,9 +145,15 @@ def words(result: dict) -> str:
     lines = []
     before, after = result["rms_before"], result["rms_after"]
     skipped = result.get("skipped_candidates") or {}
+    noise = result.get("noise") or {}
+    if noise.get("model") == "ar1":
+        lines.append("Noise correlated in time: AR(1) marker noise, " + ", ".join(
+            f"ρ = {r:.2f} ({f})" for f, r in noise["rho"].items()) + f" per frame (ΔBIC {noise['evidence']:.0f} over "
+            "white noise)" + ("; no missing physics." if result["verdict"] == "adequate" else "."))
     if result["verdict"] == "adequate":
         best = result["candidates"][0] if result["candidates"] else None
-        lines.append("The model is adequate: the residuals of every flight are white"
+        white = "AR(1) innovations" if noise.get("model") == "ar1" else "residuals"
+        lines.append(f"The model is adequate: the {white} of every flight are white"
                      + (f" and no candidate earns its place (ΔBIC > {EVIDENCE_THRESHOLD:.0f} with white residuals; "
                         f"best: {best['id']}, ΔBIC {best['evidence']:.1f})." if best else "."))
         lines.append("RMS " + rms_text(before) + ".")
@@ -159,6 +174,9 @@ def words(result: dict) -> str:
                 for s in moved) + ".")
         else:
             lines.append("No base coefficient moved by more than 2 sd.")
+    if noise.get("ar1_explains") is False:
+        lines.append(f"Correlated (AR(1)) marker noise was tried (ΔBIC {noise['ar1_evidence']:.0f} over white noise) "
+                     "and leaves the structure below unexplained too, so it is not taken as the explanation.")
     for u in result["unexplained"]:
         a, b = u["peak_window_s"]
         onset = u["model_follows_until_s"]
@@ -233,6 +251,64 @@ def save_series(path: Path, diag: Diagnosis) -> None:
     np.savez_compressed(path, **arrays)
 
 
+def correlated_noise(cfg: RunConfig, diag: Diagnosis, build_for, candidates, processes: int = 1) -> tuple:
+    """The diagnosis again with AR(1) marker noise, when that explains the data better (module docstring).
+
+    Parameters
+    ----------
+    cfg : RunConfig
+        The run (its marker noise model is replaced by ``ar1``; flights with their own noise model keep it).
+    diag : Diagnosis
+        The diagnosis with the run's own noise model.
+    build_for : callable
+        ``build_for(cfg)`` → ``build(ids)``: the problem of the run configuration ``cfg`` with the extra
+        term ids.
+    candidates : list of str
+        The candidate ids judged.
+    processes : int
+        Parallel candidate fits.
+
+    Returns
+    -------
+    (Diagnosis, dict, RunConfig) or None
+        The diagnosis under AR(1) noise, the ``noise`` record ({model, rho: {flight: ρ}, evidence}) and the
+        configuration it used; None when not tried (no marker flight with unexplained structure, or the
+        run's marker noise is not the plain model). When tried but AR(1) does not earn its place, the
+        original diagnosis with the record {model: "white", ar1_evidence}; also when AR(1) earns its place
+        but leaves structure that no term explains either (then with ``ar1_rho`` and ``ar1_explains``
+        False): a deterministic disturbance pushes ρ towards 1 without whitening the residuals.
+    """
+    base = diag.base
+    problem = base.problem
+    marker_flights = {f.name for f, ch in zip(problem.flights, problem.channels) if any(c.id == "markers" for c in ch)}
+    left = {f for f, series in diag.unexplained.items() if series}
+    if diag.accepted or not (left & marker_flights) or cfg.noise.model != "gaussian":
+        return None
+    cfg_ar = replace(cfg, noise=replace(cfg.noise, model="ar1"))
+    build = build_for(cfg_ar)
+    p_ar = build(base.ids)
+    x0 = p_ar.layout.transfer(base.ls.theta, problem.layout, p_ar.start_vector())
+    ls = refine_least_squares(p_ar, x0, max_nfev=cfg.least_squares.max_nfev)
+    fit = model_fit(p_ar, ls, base.ids)
+    n = problem.n_coords.astype(float)
+    k = p_ar.dim - problem.dim
+    gain = float(np.sum(n * np.log(base.ss / fit.ss)) - k * np.log(np.sum(n)))
+    rho = {f.name: float(ls.theta[p_ar.names.index(f"rho_{f.name}")]) for f in p_ar.flights
+           if f"rho_{f.name}" in p_ar.names}
+    if not np.isfinite(gain) or gain <= EVIDENCE_THRESHOLD:
+        logger.info(f"AR(1) marker noise does not earn its place (ΔBIC {gain:.1f}); the noise is white")
+        return diag, {"model": "white", "ar1_evidence": gain}, cfg
+    logger.info("noise correlated: AR(1) marker noise, " + ", ".join(f"ρ {f} {r:.2f}" for f, r in rho.items())
+                + f" (ΔBIC {gain:.1f} over white noise); judging the candidates again with it")
+    again = diagnose(fit, build, processes=processes, max_nfev=cfg.least_squares.max_nfev,
+                     candidates=candidates, log=logger.info)
+    if again.accepted or not any(again.unexplained.values()):
+        return again, {"model": "ar1", "rho": rho, "evidence": gain}, cfg_ar
+    # AR(1) only absorbs structure it cannot whiten (a gust, say, gives ρ → 1): not evidence of correlated noise
+    logger.info("AR(1) marker noise leaves the structure unexplained too; the diagnosis stays with white noise")
+    return diag, {"model": "white", "ar1_evidence": gain, "ar1_rho": rho, "ar1_explains": False}, cfg
+
+
 def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progress: bool = True) -> dict:
     """The ``diagnose`` command without its report (module docstring).
 
@@ -262,8 +338,10 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
     throws = load_run_throws(cfg)          # read (and their repairs reported) once, not once per candidate
     base_ids = tuple(cfg.physics)
 
-    def build(ids):
-        return build_problem(cfg, terms_override=list(ids), flights=flights, throws=throws)
+    def build_for(c: RunConfig):
+        return lambda ids: build_problem(c, terms_override=list(ids), flights=flights, throws=throws)
+
+    build = build_for(cfg)
 
     problem = build(base_ids)
     logger.info(f"{cfg.name}: {problem.n_flights} flights; base model"
@@ -278,6 +356,9 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
     logger.info(f"ranking {len(candidates)} candidates by ΔBIC (each a least-squares refit):")
     diag = diagnose(base, build, processes=processes, max_nfev=cfg.least_squares.max_nfev,
                     candidates=candidates, log=logger.info)
+    noise = correlated_noise(cfg, diag, build_for, candidates, processes=processes)
+    if noise is not None:
+        diag, noise, cfg = noise
     base = diag.base                      # the base model's best optimum (it may have been refitted)
     final = diag.final
     result = {"verdict": diag.verdict, "effects": [], "rms_before_mm": base.rms_mm, "rms_after_mm": final.rms_mm,
@@ -324,6 +405,8 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
     result["coefficients_before"] = before_est
     result["coefficients_after"] = after_est
     result["model"] = {"base": list(base_ids), "final": list(final.ids)}
+    if noise is not None:
+        result["noise"] = noise
     result["settings"] = {"evidence_threshold_delta_bic": EVIDENCE_THRESHOLD, "resampled": bool(diag.accepted and sample),
                           "refit_run": str(refit_dir) if diag.accepted and sample else None}
     result["words"] = words(result)

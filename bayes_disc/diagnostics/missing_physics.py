@@ -348,8 +348,9 @@ def onset_unavailable(problem: Problem, k: int) -> str | None:
 
 
 def _prefix_is_white(fit: ModelFit, k: int, t_end: float, alpha: float) -> bool:
-    """Whether flight k's first part [t_0, t_end], refitted over its 12 initial conditions with the
-    coefficients and extra parameters of ``fit`` held, leaves white residuals (all nine series)."""
+    """Whether flight k's first part [t_0, t_end], refitted over its own parameters (12 initial conditions and
+    its noise model's, e.g. ρ) with the coefficients and extra parameters of ``fit`` held, leaves white
+    residuals (all nine series)."""
     p = fit.problem
     f = p.flights[k].window(None, t_end)
     sub = p.subset(k, f)
@@ -359,7 +360,7 @@ def _prefix_is_white(fit: ModelFit, k: int, t_end: float, alpha: float) -> bool:
     def resid(x):
         return whitened_residuals(np.r_[fixed, x], sub, sigma)[: int(sub.n_coords[0])]
 
-    x0 = fit.ls.theta[p.ic_slice(k)]
+    x0 = fit.ls.theta[p.layout.flight_slice(k)]        # initial conditions, then the flight's own parameters
     res = least_squares(resid, x0, x_scale=sub.prior_sd[sub.ic_start:], max_nfev=50, xtol=1e-10, ftol=1e-10)
     theta = np.r_[fixed, res.x]
     rms = float(np.sqrt(np.mean((resid(res.x) * sigma[0]) ** 2)))

@@ -256,7 +256,12 @@ class MarkerPositions(ObservationModel):
         else:
             seen, ref = np.ones(pred.shape[:2], bool), reference[0]
         n_seen = np.sum(seen, axis=1)
-        _, proj, rot, rot_se = marker_series(np.where(seen[..., None], ref - pred, 0.0), st, pred, seen, conditions)
+        diff = np.where(seen[..., None], ref - pred, 0.0)
+        if reference is None and not self.noise.white:
+            # the noise model's innovations per marker coordinate (AR(1) filtered, per-point standardised),
+            # so that the series' whiteness tests see what the noise model does not explain
+            diff[seen] = self.noise.whiten(diff[seen].reshape(1, -1), self._own(extra)).reshape(-1, 3)
+        _, proj, rot, rot_se = marker_series(diff, st, pred, seen, conditions)
         names = DIRECTIONS + ROTATIONS
         cov = {"alpha": conditions.alpha[0], "speed": conditions.speed[0], "spin": st[:, 12],
                "height": st[:, 2], "time": self.times - self.times[0]}
