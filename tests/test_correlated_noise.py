@@ -9,18 +9,7 @@ from bayes_disc.cli import main
 from bayes_disc.diagnostics.residuals import flight_residuals, ljung_box
 from bayes_disc.observation.synth import Defects, LaunchSpec, SynthSpec, synthesize, write_synth
 
-from test_noise import _fit, _problem, clean  # noqa: F401 (clean: a fixture)
-
-CONFIG = """name: {name}
-flights:
-  - file: flights.csv
-markers:
-  "0": [0.100, 0.000, -0.015]
-  "1": [-0.0308, 0.0846, -0.015]
-  "2": [-0.0707, -0.0778, -0.015]
-output: out
-least_squares: {{starts: 1}}
-"""
+from test_noise import CONFIG, _fit, _problem, clean  # noqa: F401 (clean: a fixture)
 
 
 def test_residual_series_of_ar1_noise_are_its_innovations(clean):
@@ -54,7 +43,7 @@ def test_diagnose_says_noise_correlated_not_missing_physics(tmp_path, monkeypatc
                           noise_mm=1.5, defects=ar))
     write_synth(synthesize(SynthSpec(name="c", flights=flights, seed=21)), tmp_path / "flights.csv",
                 tmp_path / "truth.json")
-    (tmp_path / "config.yaml").write_text(CONFIG.format(name="corr"))
+    (tmp_path / "config.yaml").write_text(CONFIG.format(name="corr", extra="output: out\nleast_squares: {starts: 1}"))
     assert main(["diagnose", str(tmp_path / "config.yaml"), "--no-sample", "--processes", "1", "--no-progress"]) == 0
     d = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
     assert d["noise"]["model"] == "ar1" and d["noise"]["evidence"] > 10, d["noise"]
