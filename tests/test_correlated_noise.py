@@ -3,7 +3,6 @@ import json
 from dataclasses import replace
 
 import numpy as np
-import pytest
 
 from bayes_disc.cli import main
 from bayes_disc.diagnostics.residuals import flight_residuals, ljung_box
