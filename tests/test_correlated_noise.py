@@ -1,27 +1,18 @@
 """Correlated noise is not missing physics: `diagnose` tells them apart (issue 16)."""
 import json
-from dataclasses import replace
-
-import numpy as np
 
 from bayes_disc.cli import main
 from bayes_disc.diagnostics.residuals import flight_residuals, ljung_box
 from bayes_disc.observation.synth import Defects, LaunchSpec, SynthSpec, synthesize, write_synth
 
-from test_noise import CONFIG, _fit, _problem, clean  # noqa: F401 (clean: a fixture)
+from test_noise import CONFIG, _fit, _problem, clean, with_ar1_noise  # noqa: F401 (clean: a fixture)
 
 
 def test_residual_series_of_ar1_noise_are_its_innovations(clean):
     """Diagnostics judge whiteness on what the noise model does not explain: with AR(1) noise ρ = 0.85 in
     the data, the marker residual series (translations and the attitude series, whose marker combinations
     turn with the spin) are white under the AR(1) model at its fit, and structured under white noise."""
-    rng = np.random.default_rng(11)
-    n, m = clean.positions.shape[:2]
-    z = np.empty((n, m, 3))
-    z[0] = rng.normal(size=(m, 3))
-    for i in range(1, n):
-        z[i] = 0.85 * z[i - 1] + np.sqrt(1 - 0.85 ** 2) * rng.normal(size=(m, 3))
-    noisy = replace(clean, positions=clean.positions + 2e-3 * z)
+    noisy = with_ar1_noise(clean)
     p_ar, p_white = _problem(noisy, noise_model="ar1"), _problem(noisy)
     ls_ar, ls_white = _fit(p_ar), _fit(p_white)
     level = 1e-3 / 9                                     # the diagnosis' Bonferroni level for nine series

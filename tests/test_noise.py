@@ -205,14 +205,19 @@ def _fit(problem):
     return refine_least_squares(problem, x, max_nfev=100)
 
 
-def test_least_squares_estimates_rho_of_ar1_noise(clean):
-    rng = np.random.default_rng(11)
-    n, m = clean.positions.shape[:2]
+def with_ar1_noise(flight, rho: float = 0.85, sd: float = 2e-3, seed: int = 11):
+    """The flight with stationary AR(1) noise (coefficient ρ per sample, sd [m]) added to every coordinate."""
+    rng = np.random.default_rng(seed)
+    n, m = flight.positions.shape[:2]
     z = np.empty((n, m, 3))
     z[0] = rng.normal(size=(m, 3))
     for i in range(1, n):
-        z[i] = 0.85 * z[i - 1] + np.sqrt(1 - 0.85 ** 2) * rng.normal(size=(m, 3))
-    noisy = replace(clean, positions=clean.positions + 2e-3 * z)
+        z[i] = rho * z[i - 1] + np.sqrt(1 - rho ** 2) * rng.normal(size=(m, 3))
+    return replace(flight, positions=flight.positions + sd * z)
+
+
+def test_least_squares_estimates_rho_of_ar1_noise(clean):
+    noisy = with_ar1_noise(clean)
     ls = _fit(_problem(noisy, noise_model="ar1"))
     rho = ls.theta[ls.names.index("rho_a")]
     assert 0.7 < rho < 0.95, rho
