@@ -320,6 +320,9 @@ def test_number_formats():
 def test_bad_run_folder_is_a_one_line_input_error(tmp_path, tiny, capsys):
     with pytest.raises(ReportInputError, match="run folder not found"):
         build_report(tmp_path / "nope")
+    (tmp_path / "config.yaml").write_text("name: x\n")
+    with pytest.raises(ReportInputError, match="this is a run configuration; give its run folder"):
+        build_report(tmp_path / "config.yaml")
     (tmp_path / "a").mkdir()
     with pytest.raises(ReportInputError, match="summary.json"):
         build_report(tmp_path / "a")

@@ -72,6 +72,9 @@ def _find_config(run_dir: Path, recorded: str | None) -> Path:
 def load_run(run_dir) -> RunData:
     """Read and check a run folder written by ``bayes-disc sample``."""
     run_dir = Path(run_dir)
+    if run_dir.is_file() and run_dir.suffix.lower() in (".yaml", ".yml"):
+        raise ReportInputError(run_dir, "this is a run configuration; give its run folder (the `output` of the "
+                                        "configuration, e.g. runs/demo/out)")
     if not run_dir.is_dir():
         raise ReportInputError(run_dir, "run folder not found")
     sp = run_dir / "summary.json"

@@ -114,7 +114,7 @@ def inertial_section(ctx) -> Section | None:
             + table(["parameter", "median", "90 % interval", "unit", "R-hat", "ESS"], rows, "num")
             + flights_table(ctx))
     seg_rows = [[name, v.get("status", ""), v.get("segment", {}).get("start_row", "—"),
-                 v.get("segment", {}).get("end_row", "—"), v.get("rows", ""), esc(v.get("reason", ""))]
+                 v.get("segment", {}).get("end_row", "—"), v.get("rows", ""), v.get("reason", "")]
                 for name, v in throws.items()]
     if seg_rows:
         html += ("<p class=note>How the throws were found in the logs (release: end of the spin-up; end: first "
