@@ -8,12 +8,13 @@ The Python API (:mod:`bayes_disc.api`)::
     run.idata                               # ArviZ InferenceData
     run.report()                            # reports/<name>.html
     bd.load(run.output)                     # the same run, from disk
+    bd.compare([run_a, run_b])              # PSIS-LOO comparison of runs of the same flights
 
 See docs/api.md for a worked example.
 """
 from ._version import __version__
-from .api import (DiagnosisResult, IdentifiabilityResult, SampleResult, diagnose, identifiability, load,
-                  run_config, sample)
+from .api import (DiagnosisResult, IdentifiabilityResult, SampleResult, compare, diagnose, identifiability,
+                  load, run_config, sample)
 
-__all__ = ["__version__", "sample", "identifiability", "diagnose", "load", "run_config", "SampleResult",
+__all__ = ["__version__", "sample", "identifiability", "diagnose", "load", "compare", "run_config", "SampleResult",
            "IdentifiabilityResult", "DiagnosisResult"]

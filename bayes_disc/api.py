@@ -581,3 +581,37 @@ def load(run_dir) -> SampleResult:
         If the folder is not a sampled run.
     """
     return SampleResult.from_dir(run_dir)
+
+
+def compare(run_dirs):
+    """PSIS-LOO comparison (``az.compare``) of sampled runs of the same observations, e.g. the same flights
+    fitted with different noise models or physics terms.
+
+    Parameters
+    ----------
+    run_dirs : sequence of str, Path or SampleResult, or dict {label: any of these}
+        Two or more sampled runs (output folders of :func:`sample`, or its results); labels default to the
+        folder's name (its parent's name for a folder called ``out``).
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per run, best first: ``elpd_loo`` (expected log predictive density of the observed marker
+        points, natural log), ``se``, ``elpd_diff`` and ``dse`` (difference to the best and its standard
+        error), ``p_loo`` (effective number of parameters), ``weight`` (stacking), ``warning`` and
+        ``pareto_k_high`` (points with Pareto k̂ above ArviZ's threshold min(1 − 1/log10 S, 0.7), S draws).
+
+    Raises
+    ------
+    ValueError
+        If fewer than two runs are given, a run has no pointwise log-likelihood, or the runs' observed
+        marker points differ.
+    """
+    from .inference.results import compare_runs
+
+    def folder(run):
+        return run.output if isinstance(run, SampleResult) else run
+    if isinstance(run_dirs, Mapping):
+        return compare_runs({label: folder(r) for label, r in run_dirs.items()})
+    return compare_runs([folder(r) for r in run_dirs])
+

@@ -101,6 +101,42 @@ def _cmd_calibrate(args) -> int:
     return 0
 
 
+def _cmd_compare(args) -> int:
+    import json
+    from .api import compare
+    from .inference.results import run_label
+    try:
+        table = compare(args.run_dirs)
+    except (ValueError, FileNotFoundError) as e:
+        logger.error(f"bayes-disc compare: {e}")
+        return 2
+    head = f"{'run':<24}{'elpd_loo':>11}{'se':>8}{'elpd_diff':>11}{'dse':>8}{'p_loo':>8}{'weight':>8}{'k high':>7}"
+    lines = [head] + [f"{str(label)[:23]:<24}{r.elpd_loo:>11.1f}{r.se:>8.1f}{r.elpd_diff:>11.1f}{r.dse:>8.1f}"
+                      f"{r.p_loo:>8.1f}{r.weight:>8.2f}{int(r.pareto_k_high):>7d}" for label, r in table.iterrows()]
+    logger.info("\n".join(lines), extra=RESULT)
+    best = table.index[0]
+    for label, r in list(table.iterrows())[1:]:
+        clear = r.elpd_diff > 2 * r.dse
+        logger.info(f"{label}: {r.elpd_diff:.1f} ± {r.dse:.1f} below {best} in expected log predictive density "
+                    + ("(more than twice its standard error: a clear difference)" if clear else
+                       "(within twice its standard error: not distinguished by these data)"), extra=RESULT)
+    high = [str(label) for label, r in table.iterrows() if r.pareto_k_high]
+    if high:
+        logger.warning(f"Pareto k̂ above ArviZ's threshold at some points of {', '.join(high)}: their PSIS-LOO "
+                       "values are unreliable (influential points; see docs/outputs.md)")
+    if args.output:
+        out = Path(args.output)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        kinds = {"warning": bool, "rank": int, "pareto_k_high": int}
+        rows = {str(label): {k: kinds.get(k, float)(v) for k, v in r.items() if k != "scale"}
+                for label, r in table.iterrows()}
+        record = {"criterion": "loo", "scale": "log",
+                  "runs": {run_label(d): str(Path(d)) for d in args.run_dirs}, "comparison": rows}
+        out.write_text(json.dumps(record, indent=1) + "\n")
+        logger.info(f"wrote {out}")
+    return 0
+
+
 def _verbosity_options(parser, default) -> None:
     """``-v/--verbose`` and ``-q/--quiet`` (repeatable); ``default`` SUPPRESS on subcommands so that a flag
     given before the subcommand is not reset by the subcommand's defaults."""
@@ -203,6 +239,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--output", metavar="DIR", help="override the campaign's output folder")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (finished replicates are logged)")
     p.set_defaults(func=_cmd_calibrate)
+    p = sub.add_parser("compare", parents=[common],
+                       help="PSIS-LOO comparison of sampled runs of the same flights (az.compare)",
+                       description="Compares two or more `bayes-disc sample` runs of the same observed marker "
+                                   "points (e.g. the same flights with different noise models or physics terms) by "
+                                   "their expected log predictive density (PSIS-LOO, az.compare): the best first, "
+                                   "each other's difference with its standard error, stacking weights, and points "
+                                   "with unreliable LOO values (Pareto k above min(1 - 1/log10 S, 0.7), S draws). "
+                                   "Optionally writes the table as JSON (docs/outputs.md).")
+    p.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="output folders of `bayes-disc sample` (two or more)")
+    p.add_argument("--output", metavar="FILE", help="write the comparison as JSON to FILE")
+    p.set_defaults(func=_cmd_compare)
     _register_optional(sub, common)
     return parser
 

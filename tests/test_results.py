@@ -177,6 +177,30 @@ def test_loo_and_compare_on_two_runs(base, side, folder):
     assert table["rank"].min() == 0 and table["weight"].sum() == pytest.approx(1.0)
 
 
+def test_compare_command_prints_the_table_and_writes_json(base, side, folder, tmp_path, capsys):
+    import json
+
+    import bayes_disc as bd
+    from bayes_disc.cli import main
+    out = tmp_path / "cmp" / "comparison.json"
+    assert main(["compare", str(folder / "out_base"), str(folder / "out_side"), "--output", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "elpd_loo" in text and "out_base" in text and "out_side" in text and "below" in text
+    record = json.loads(out.read_text())
+    table = bd.compare([folder / "out_base", folder / "out_side"])
+    assert list(record["comparison"]) == list(table.index)
+    for label, row in record["comparison"].items():
+        assert row["elpd_loo"] == pytest.approx(table.loc[label, "elpd_loo"])
+        assert row["pareto_k_high"] == table.loc[label, "pareto_k_high"] >= 0
+    assert sum(r["weight"] for r in record["comparison"].values()) == pytest.approx(1.0)
+    # one run, or a folder that is not a run: one line on stderr, exit status 2
+    assert main(["compare", str(folder / "out_base")]) == 2
+    assert "at least two" in capsys.readouterr().err
+    assert main(["compare", str(folder / "out_base"), str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "posterior.nc" in err
+
+
 def test_compare_refuses_runs_of_different_observations(base, folder, tmp_path):
     idata = load_posterior(folder / "out_base" / "posterior.nc")
     ll = idata.log_likelihood
