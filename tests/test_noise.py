@@ -397,6 +397,33 @@ def test_robust_flags_an_outlier_and_recognises_a_swap(clean):
     assert np.any(np.abs(ls0.theta[:10] - ref.theta[:10]) > 0.5 * sd)      # the defects did pull the plain fit
 
 
+def test_gaussian_runs_are_warned_of_gross_errors_and_clean_data_are_not(clean, caplog):
+    """With plain Gaussian noise, outliers and a swapped frame in the data are reported with the fix
+    (`noise: {model: robust}`) before sampling; on clean data (and with robust noise) nothing is said."""
+    import logging
+
+    from bayes_disc.inference.robust import gross_error_advice, suspected_gross_errors
+    from bayes_disc.inference.run import _robust
+    rng = np.random.default_rng(22)
+    pos = clean.positions + 1.5e-3 * rng.normal(size=clean.positions.shape)
+    plain = _problem(replace(clean, positions=pos.copy()))
+    assert suspected_gross_errors(plain, _fit(plain).theta) == {}
+    assert gross_error_advice({}) is None
+    for i, j in ((5, 0), (17, 1), (33, 2)):
+        pos[i, j] += rng.choice([-1, 1], size=3) * 0.02
+    pos[40, [0, 1]] = pos[40, [1, 0]]
+    bad = _problem(replace(clean, positions=pos))
+    ls = _fit(bad)
+    assert suspected_gross_errors(bad, ls.theta) == {"a": {"outliers": 3, "swaps": 1}}
+    with caplog.at_level(logging.WARNING, logger="bayes_disc"):
+        _robust(bad, ls, {}, None, None)
+    assert "a: 3 point(s) as gross errors, 1 frame(s) as swapped labels" in caplog.text
+    assert "noise: {model: robust}" in caplog.text
+    # AR(1) flights are not judged (their residuals are correlated by design)
+    ar1 = _problem(replace(clean, positions=pos), noise_model="ar1")
+    assert suspected_gross_errors(ar1, ar1.start_vector()) == {}
+
+
 def test_classification_probabilities_by_hand():
     """Two markers far apart, one frame: exchanged labels are a swap; one displaced marker is an outlier."""
     from bayes_disc.observation.models.outliers import (OUTLIER_FRACTION, OUTLIER_WIDTH_M, SWAP_FRACTION,

@@ -18,7 +18,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from ..observation.models import MarkerPositions
-from ..observation.models.noise import RobustNoise
+from ..observation.models.noise import RobustNoise, WhiteNoise
 from ..observation.models.outliers import Classification, classify, clean_flight
 from .leastsq import LeastSquaresResult, refine_least_squares
 from .model import Problem
@@ -55,6 +55,57 @@ def judge(problem: Problem, theta: np.ndarray, k: int, model: MarkerPositions, d
     r2 = np.sum((pred[0] - data.positions) ** 2, axis=-1)[seen] / c[seen] ** 2
     sigma = np.sqrt(np.median(r2) / _CHI2_3_MEDIAN)
     return classify(data.name, data.times, data.marker_ids, pred[0], data.positions, sigma * c)
+
+
+def suspected_gross_errors(problem: Problem, theta: np.ndarray) -> dict:
+    """The mixture's judgement (:func:`judge`) of the marker flights with white Gaussian noise (per-point
+    errors included; not ``robust``, whose gross errors are handled, nor AR(1)) at θ: what a Gaussian
+    likelihood would let pull the fit.
+
+    Parameters
+    ----------
+    problem : Problem
+        The run's problem.
+    theta : ndarray, shape (problem.dim,)
+        Its least-squares optimum.
+
+    Returns
+    -------
+    dict
+        {flight: {"outliers": n, "swaps": n}} for the flights where any point or frame is flagged
+        (probability > 0.5); empty when none is.
+    """
+    out = {}
+    for k, ch in enumerate(problem.channels):
+        for c in ch:
+            if isinstance(c, MarkerPositions) and type(c.noise) is WhiteNoise:
+                rec = judge(problem, theta, k, c, c.data).records()
+                if rec["outliers"] or rec["swaps"]:
+                    out[c.flight] = {"outliers": len(rec["outliers"]), "swaps": len(rec["swaps"])}
+    return out
+
+
+def gross_error_advice(suspects: dict) -> str | None:
+    """One sentence for the user when :func:`suspected_gross_errors` found any: what, where, and the fix.
+
+    Parameters
+    ----------
+    suspects : dict
+        Its result.
+
+    Returns
+    -------
+    str or None
+        None when nothing is suspected.
+    """
+    if not suspects:
+        return None
+    where = "; ".join(f"{f}: {v['outliers']} point(s) as gross errors, {v['swaps']} frame(s) as swapped labels"
+                      for f, v in suspects.items())
+    return (f"the data look as if they hold gross errors ({where}; judged at the least-squares fit by the "
+            "inlier/outlier/swap mixture). A Gaussian likelihood lets them pull the coefficients, and its "
+            "intervals do not widen for it: set `noise: {model: robust}` (for all flights, or per flight under "
+            "flight_options) to have them judged, listed and left out (docs/configuration.md)")
 
 
 def robust_refit(problem: Problem, ls: LeastSquaresResult, max_nfev: int = 200, progress=None):

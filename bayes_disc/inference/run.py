@@ -35,7 +35,8 @@ from .inertial import load_run_throws
 from .leastsq import fit_least_squares
 from .results import build_inference_data, build_summary, format_table, prior_record
 from .profile import profile_paths
-from .robust import FLAGGED, robust_flights, robust_refit, with_saved_flags
+from .robust import (FLAGGED, gross_error_advice, robust_flights, robust_refit, suspected_gross_errors,
+                     with_saved_flags)
 from .proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
 from .sampler import n_walkers, run_sampler, saved_steps
 from .versions import software_versions
@@ -261,7 +262,11 @@ def flag_lines(flags: dict) -> list[str]:
 
 def _robust(problem, ls, ls_dict: dict, cfg: RunConfig, out: Path):
     """For ``robust`` marker noise: judge, clean and refit (:func:`.robust.robust_refit`), write
-    ``flagged.json`` and the refined least-squares files, log every flag."""
+    ``flagged.json`` and the refined least-squares files, log every flag. Flights with plain Gaussian noise
+    whose data look as if they hold gross errors get a warning with the fix (:func:`.robust.gross_error_advice`)."""
+    advice = gross_error_advice(suspected_gross_errors(problem, ls.theta))
+    if advice is not None:
+        logger.warning(advice)
     if not robust_flights(problem):
         return problem, ls, ls_dict
     with stage("robust fit", "judging outliers and label swaps, refitting on the cleaned data") as st:
