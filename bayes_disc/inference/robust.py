@@ -25,6 +25,10 @@ from .model import Problem
 
 #: the judgement a run wrote (in its output folder)
 FLAGGED = "flagged.json"
+#: probability of a gross error above which a Gaussian-noise run is warned (stricter than the robust
+#: model's flag at 0.5: with 10× noise on some points, a 3.5-sd residual of a noisy point reaches 0.5 now and
+#: then, since the outlier spread, 5 cm, is then only five times its noise)
+SUSPECT_PROBABILITY = 0.99
 #: most judge–clean–refit rounds
 MAX_ROUNDS = 5
 _CHI2_3_MEDIAN = float(chi2.median(3))
@@ -72,16 +76,18 @@ def suspected_gross_errors(problem: Problem, theta: np.ndarray) -> dict:
     Returns
     -------
     dict
-        {flight: {"outliers": n, "swaps": n}} for the flights where any point or frame is flagged
-        (probability > 0.5); empty when none is.
+        {flight: {"outliers": n, "swaps": n}} for the flights where any point or frame is judged a gross
+        error with probability ≥ :data:`SUSPECT_PROBABILITY`; empty when none is.
     """
     out = {}
     for k, ch in enumerate(problem.channels):
         for c in ch:
             if isinstance(c, MarkerPositions) and type(c.noise) is WhiteNoise:
                 rec = judge(problem, theta, k, c, c.data).records()
-                if rec["outliers"] or rec["swaps"]:
-                    out[c.flight] = {"outliers": len(rec["outliers"]), "swaps": len(rec["swaps"])}
+                n_out, n_swap = (sum(r["probability"] >= SUSPECT_PROBABILITY for r in rec[key])
+                                 for key in ("outliers", "swaps"))
+                if n_out or n_swap:
+                    out[c.flight] = {"outliers": int(n_out), "swaps": int(n_swap)}
     return out
 
 
