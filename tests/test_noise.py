@@ -414,7 +414,10 @@ def test_gaussian_runs_are_warned_of_gross_errors_and_clean_data_are_not(clean, 
     pos[40, [0, 1]] = pos[40, [1, 0]]
     bad = _problem(replace(clean, positions=pos))
     ls = _fit(bad)
-    assert suspected_gross_errors(bad, ls.theta) == {"a": {"outliers": 3, "swaps": 1}}
+    suspects = suspected_gross_errors(bad, ls.theta)
+    assert suspects == {"a": {"outliers": 3, "swaps": 1, "points": bad.flights[0].observed.sum()}}
+    assert "noise more likely varies" not in gross_error_advice(suspects)
+    assert "noise more likely varies" in gross_error_advice({"a": {"outliers": 30, "swaps": 0, "points": 600}})
     with caplog.at_level(logging.WARNING, logger="bayes_disc"):
         _robust(bad, ls, {}, None, None)
     assert "a: 3 point(s) as gross errors, 1 frame(s) as swapped labels" in caplog.text

@@ -29,6 +29,9 @@ FLAGGED = "flagged.json"
 #: model's flag at 0.5: with 10× noise on some points, a 3.5-sd residual of a noisy point reaches 0.5 now and
 #: then, since the outlier spread, 5 cm, is then only five times its noise)
 SUSPECT_PROBABILITY = 0.99
+#: share of a flight's points judged gross errors above which the advice names varying noise instead
+#: (the robust model's prior share of gross errors is 1 %)
+MANY_SUSPECTS = 0.02
 #: most judge–clean–refit rounds
 MAX_ROUNDS = 5
 _CHI2_3_MEDIAN = float(chi2.median(3))
@@ -76,8 +79,8 @@ def suspected_gross_errors(problem: Problem, theta: np.ndarray) -> dict:
     Returns
     -------
     dict
-        {flight: {"outliers": n, "swaps": n}} for the flights where any point or frame is judged a gross
-        error with probability ≥ :data:`SUSPECT_PROBABILITY`; empty when none is.
+        {flight: {"outliers": n, "swaps": n, "points": observed points}} for the flights where any point or
+        frame is judged a gross error with probability ≥ :data:`SUSPECT_PROBABILITY`; empty when none is.
     """
     out = {}
     for k, ch in enumerate(problem.channels):
@@ -87,7 +90,8 @@ def suspected_gross_errors(problem: Problem, theta: np.ndarray) -> dict:
                 n_out, n_swap = (sum(r["probability"] >= SUSPECT_PROBABILITY for r in rec[key])
                                  for key in ("outliers", "swaps"))
                 if n_out or n_swap:
-                    out[c.flight] = {"outliers": int(n_out), "swaps": int(n_swap)}
+                    out[c.flight] = {"outliers": int(n_out), "swaps": int(n_swap),
+                                     "points": int(c.data.observed.sum())}
     return out
 
 
@@ -108,10 +112,16 @@ def gross_error_advice(suspects: dict) -> str | None:
         return None
     where = "; ".join(f"{f}: {v['outliers']} point(s) as gross errors, {v['swaps']} frame(s) as swapped labels"
                       for f, v in suspects.items())
-    return (f"the data look as if they hold gross errors ({where}; judged at the least-squares fit by the "
+    text = (f"the data look as if they hold gross errors ({where}; judged at the least-squares fit by the "
             "inlier/outlier/swap mixture). A Gaussian likelihood lets them pull the coefficients, and its "
             "intervals do not widen for it: set `noise: {model: robust}` (for all flights, or per flight under "
             "flight_options) to have them judged, listed and left out (docs/configuration.md)")
+    many = [f for f, v in suspects.items() if v["outliers"] > MANY_SUSPECTS * v.get("points", np.inf)]
+    if many:
+        text += (f". In {', '.join(many)} so many points are suspect (more than {MANY_SUSPECTS:.0%} of the flight) "
+                 "that the noise more likely varies along the flight than slips occurred: give each point its "
+                 "error (a `sigma_m` column or the covariances `track` writes, with `noise: {per_point: true}`)")
+    return text
 
 
 def robust_refit(problem: Problem, ls: LeastSquaresResult, max_nfev: int = 200, progress=None):
