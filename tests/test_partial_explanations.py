@@ -129,3 +129,53 @@ FLIGHTS = [
     dict(name="g2", speed=14.0, launch_angle_deg=0, alpha_deg=2, roll_deg=-4, spin=65, duration=1.0,
          position=[0, 0, 0.45]),
 ]
+
+
+# -- statuses (judge on stand-in fits) --------------------------------------------------------------------
+
+class _Problem:
+    """The parts of a Problem judge() reads: two flights of one noise group each."""
+
+    def __init__(self, n_ext):
+        self.n_coords = np.array([3000, 3000])
+        self.flights = [type("F", (), {"name": n})() for n in ("g1", "g2")]
+        self.n_ext, self.n_groups = n_ext, 2
+
+    def flight_groups(self, k):
+        return np.array([k])
+
+
+class _Fit:
+    """A stand-in ModelFit: sums of squares S_g and the Ljung–Box p of one series per flight."""
+
+    def __init__(self, ss, p_values, n_ext=0):
+        self.problem, self.ss = _Problem(n_ext), np.asarray(ss, float)
+        self.localisation = {f: {"lateral": {"ljung_box_p": p}} for f, p in zip(("g1", "g2"), p_values)}
+
+
+def test_statuses_follow_evidence_whiteness_and_share():
+    from bayes_disc.diagnostics.missing_physics import best_partial, judge
+    floor = np.array([3000.0, 3000.0])                   # σ̂ = 1 per residual
+    base = _Fit([6000.0, 3000.0], [1e-9, 0.5])            # 3000 excess, all in g1
+    white, structured = [0.5, 0.5], [1e-9, 0.5]
+    cases = {"explains": ([3050.0, 3000.0], white), "partially_explains": ([3600.0, 3000.0], structured),
+             "insufficient": ([5000.0, 3000.0], structured), "no_evidence": ([5990.0, 3000.0], structured)}
+    judged = {}
+    for want, (ss, p) in cases.items():
+        c = judge(base, want, _Fit(ss, p, n_ext=2), floor)
+        judged[want] = c
+        assert c.status == want, (want, c.status, c.share, c.delta_bic)
+    assert judged["partially_explains"].share == pytest.approx(0.8)
+    assert judged["insufficient"].share == pytest.approx(1 / 3)
+    assert judged["partially_explains"].share >= SHARE_PARTIAL > judged["insufficient"].share
+    # the best partial explanation: the single, or the pair when its partner earns its place over it
+    single = judged["partially_explains"]
+    pair_fit = _Fit([3300.0, 3000.0], structured, n_ext=4)
+    pair = judge(single.fit, "wind", pair_fit, floor, origin=base)
+    assert pair.status == "partially_explains" and pair.share == pytest.approx(0.9)      # share of base's excess
+    assert [c.id for c in best_partial(single, [pair])] == ["partially_explains", "wind"]
+    weak = judge(single.fit, "wind", _Fit([3595.0, 3000.0], structured, n_ext=4), floor, origin=base)
+    assert weak.status == "no_evidence"
+    assert [c.id for c in best_partial(single, [weak])] == ["partially_explains"]
+    assert best_partial(judged["insufficient"], []) == []
+    assert best_partial(None, []) == []
