@@ -258,7 +258,9 @@ def words(result: dict) -> str:
 
 def _unexplained(diag: Diagnosis) -> list[dict]:
     """Flights whose residuals stay structured after the accepted terms: the series (most structured
-    first), the window where the structure is strongest, and the Ljung–Box p-values."""
+    first), the window where the structure is strongest (and the flight's height there), and the Ljung–Box
+    p-values. The onset search (when the model stops following the flight) locates a disturbance; it is
+    not run on the rest of a partial explanation, which acts wherever its effect does."""
     out = []
     final = diag.final
     names = [f.name for f in final.problem.flights]
@@ -269,7 +271,7 @@ def _unexplained(diag: Diagnosis) -> list[dict]:
         k = names.index(flight)
         loc = final.localisation[flight]
         series = sorted(series, key=lambda s: loc[s]["ljung_box_p"])
-        why = onset_unavailable(final.problem, k)
+        why = (PARTIAL_ONSET_NOTE if diag.partial else onset_unavailable(final.problem, k))
         window = peak_window(final.residuals[k], final.ls.sigma)
         u = {"flight": flight, "series": series,
              "model_follows_until_s": onset_of_mismatch(final, k) if why is None else None,
@@ -281,6 +283,10 @@ def _unexplained(diag: Diagnosis) -> list[dict]:
             u["onset_note"] = why
         out.append(u)
     return out
+
+
+#: why no onset is searched in the structure a partial explanation leaves
+PARTIAL_ONSET_NOTE = "not searched: the structure is the rest of a partially explained effect, not a disturbance"
 
 
 def _window_height(fr, window) -> list | None:
@@ -380,7 +386,8 @@ def correlated_noise(cfg: RunConfig, diag: Diagnosis, build_for, candidates, pro
     return diag, {"model": "white", "ar1_evidence": gain, "ar1_rho": rho, "ar1_explains": False}, cfg
 
 
-def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progress: bool = True) -> dict:
+def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progress: bool = True,
+                 candidates=None) -> dict:
     """The ``diagnose`` command without its report (module docstring).
 
     Parameters
@@ -394,6 +401,8 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
         Parallel candidate fits.
     progress : bool
         Show a progress bar while resampling.
+    candidates : sequence of str, optional
+        The candidate ids to try (default: every one of ``CANDIDATES``); an unknown id is an error.
 
     Returns
     -------
@@ -403,6 +412,10 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
         docstring (``words``: the diagnosis in words).
     """
     t0 = time.perf_counter()
+    wanted = list(CANDIDATES if candidates is None else candidates)
+    unknown = [c for c in wanted if c not in CANDIDATES]
+    if unknown:
+        raise ValueError(f"unknown candidate(s) {unknown}; known: {list(CANDIDATES)}")
     out = Path(cfg.output)
     out.mkdir(parents=True, exist_ok=True)
     flights = load_run_flights(cfg)
@@ -421,7 +434,7 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
                            seed=cfg.sampler.seed)
     base = model_fit(problem, ls, base_ids)
     logger.info("base RMS " + rms_text(base.rms))
-    candidates, skipped = applicable_candidates(problem, [c for c in CANDIDATES if c not in base_ids])
+    candidates, skipped = applicable_candidates(problem, [c for c in wanted if c not in base_ids])
     for c, why in skipped.items():
         logger.info(f"not trying {c}: {why}")
     logger.info(f"ranking {len(candidates)} candidates by ΔBIC (each a least-squares refit):")
