@@ -26,9 +26,11 @@ inertial: the six sensor series),
     σ̂_g² = Σ_x Σ_t (Δ²x_t)² / Σ_x Σ_t (u_{t+1}² + 4u_t² + u_{t−1}²),
 
 over the triples of finite samples. Assumption: the noise is white (independent in time) and the model
-error is smooth on the scale of three samples; structure at the sample rate (vibration, tracking jitter,
-correlated noise, a sudden collision) is counted as noise, which only makes the floor higher and the
-excess misfit smaller.
+error is smooth on the scale of three samples. Structure at the sample rate (vibration, tracking jitter,
+a sudden collision) is counted as noise, which makes the floor higher and the excess misfit smaller;
+positively correlated noise (AR(1) with ρ > 0) looks smooth and makes the floor lower — by the factor
+(6 − 8ρ + 2ρ²)/6 in σ², 0.11 at ρ = 0.85 — so that its correlation is counted as excess misfit (which no
+term removes: correlated noise is judged separately, :mod:`.diagnosis`).
 """
 from __future__ import annotations
 
