@@ -4,8 +4,8 @@ Writes into the run's output folder:
 
 * ``diagnosis.json`` (SPEC §6): verdict, accepted effects ranked best first ({id, evidence (ΔBIC),
   estimate, where}, with ``status`` — ``explains`` or ``partially_explains`` — and ``share_explained``,
-  the share of the base model's excess misfit the term removes with those before it), marker RMS per flight before/after [mm] (``rms_before_mm``, ``rms_after_mm``: the
-  flights with markers); ``rms_before``/``rms_after``: every flight's RMS per recorded quantity
+  the share of the base model's excess misfit the term removes with those before it), marker RMS per
+  flight before/after [mm] (``rms_before_mm``, ``rms_after_mm``: the flights with markers); ``rms_before``/``rms_after``: every flight's RMS per recorded quantity
   ({flight: {markers|gyro|acc: {rms, unit}}}, as ``predict`` reports channels); plus every candidate's
   evidence, status and ``share_explained`` (:mod:`.missing_physics`), whiteness before/after, the shifted
   base coefficients, unexplained structure (each with the flight's height over its peak window,
