@@ -116,7 +116,7 @@ def gross_error_advice(suspects: dict) -> str | None:
             "inlier/outlier/swap mixture). A Gaussian likelihood lets them pull the coefficients, and its "
             "intervals do not widen for it: set `noise: {model: robust}` (for all flights, or per flight under "
             "flight_options) to have them judged, listed and left out (docs/configuration.md)")
-    many = [f for f, v in suspects.items() if v["outliers"] > MANY_SUSPECTS * v.get("points", np.inf)]
+    many = [f for f, v in suspects.items() if v["outliers"] > MANY_SUSPECTS * v["points"]]
     if many:
         text += (f". In {', '.join(many)} so many points are suspect (more than {MANY_SUSPECTS:.0%} of the flight) "
                  "that the noise more likely varies along the flight than slips occurred: give each point its "
