@@ -565,7 +565,7 @@ def run_label(run_dir) -> str:
     return run_dir.parent.name if run_dir.name == "out" else run_dir.name
 
 
-def compare_runs(run_dirs, ic: str = "loo"):
+def compare_runs(run_dirs):
     """PSIS-LOO comparison of sampled runs of the same observations (``az.compare``).
 
     Parameters
@@ -573,8 +573,6 @@ def compare_runs(run_dirs, ic: str = "loo"):
     run_dirs : sequence of str or Path, or dict {label: path}
         Output folders of ``bayes-disc sample`` (each with a posterior.nc that has a ``log_likelihood``
         group); labels default to the folder's run name (its parent folder's name for ``out``).
-    ic : str
-        Information criterion passed to ``az.compare`` ("loo").
 
     Returns
     -------
@@ -617,8 +615,8 @@ def compare_runs(run_dirs, ic: str = "loo"):
         # use of a deprecated keyword
         warnings.filterwarnings("ignore", message="Estimated shape parameter of Pareto")
         warnings.filterwarnings("ignore", message="The inplace keyword")
-        table = az.compare(data, ic=ic)
-        loos = {label: az.loo(data[label], pointwise=True) for label in table.index}
+        loos = {label: az.loo(idata, pointwise=True) for label, idata in data.items()}   # once per run
+        table = az.compare(loos)
     table["pareto_k_high"] = [int(np.sum(np.asarray(loos[label].pareto_k) > loos[label].good_k))
                               for label in table.index]
     return table
