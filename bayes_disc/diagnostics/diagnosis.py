@@ -3,11 +3,15 @@
 Writes into the run's output folder:
 
 * ``diagnosis.json`` (SPEC §6): verdict, accepted effects ranked best first ({id, evidence (ΔBIC),
-  estimate, where}), marker RMS per flight before/after [mm] (``rms_before_mm``, ``rms_after_mm``: the
-  flights with markers); ``rms_before``/``rms_after``: every flight's RMS per recorded quantity
+  estimate, where}, with ``status`` — ``explains`` or ``partially_explains`` — and ``share_explained``,
+  the share of the base model's excess misfit the term removes with those before it), marker RMS per
+  flight before/after [mm] (``rms_before_mm``, ``rms_after_mm``: the flights with markers); ``rms_before``/``rms_after``: every flight's RMS per recorded quantity
   ({flight: {markers|gyro|acc: {rms, unit}}}, as ``predict`` reports channels); plus every candidate's
-  evidence, whiteness before/after, the shifted base coefficients, unexplained structure, the candidates
-  skipped (with the reason) and the diagnosis in words;
+  evidence, status and ``share_explained`` (:mod:`.missing_physics`), whiteness before/after, the shifted
+  base coefficients, unexplained structure (each with the flight's height over its peak window,
+  ``peak_height_m``), the noise floor the shares refer to (``noise_floor``: σ̂ per noise group from second
+  differences), ``partial_explanation`` ({ids, share_explained, evidence} when the adopted terms only
+  partly explain the data, else null), the candidates skipped (with the reason) and the diagnosis in words;
 * ``diagnosis_residuals.npz``: the residual series before and after (report figures): per flight k and
   series name ``{k}_before_{name}``, ``{k}_after_{name}``, ``{k}_se_{name}`` (noise standard error),
   ``{k}_times_{name}`` [s], and ``{k}_times`` (the flight's first observation model's times);
@@ -41,10 +45,10 @@ from ..inference.leastsq import fit_least_squares, refine_least_squares
 from ..inference.run import RESULT, run_sample
 from ..observation.registry import unit
 from ..physics import COEFFICIENT_NAMES
-from .missing_physics import (CANDIDATES, EVIDENCE_THRESHOLD, Diagnosis, ModelFit, applicable_candidates,
-                              describe_where, diagnose, fingerprint, model_fit)
+from .missing_physics import (CANDIDATES, EVIDENCE_THRESHOLD, SHARE_PARTIAL, Diagnosis, ModelFit,
+                              applicable_candidates, describe_where, diagnose, fingerprint, model_fit)
 from .missing_physics import SERIES_WORDS, onset_of_mismatch, onset_unavailable
-from .residuals import peak_window
+from .residuals import noise_floor, peak_window
 
 logger = logging.getLogger(__name__)
 #: a base coefficient "moved" when the refit shifts it by more than this many base standard deviations
@@ -140,6 +144,54 @@ def rms_text(rms: dict, after: dict | None = None) -> str:
     return "; ".join(parts)
 
 
+def effect_name(term_id: str) -> str:
+    """A term's id in words ('ground_effect' → 'ground effect')."""
+    return term_id.replace("_", " ")
+
+
+def _share_text(share) -> str:
+    return f"{100 * share:.0f} %" if share is not None and np.isfinite(share) else "part"
+
+
+def _rest_text(unexplained: list) -> str:
+    """Where the structure a partial explanation leaves sits: its flights, then the strongest window."""
+    if not unexplained:
+        return "no flight's residuals stay structured"
+    flights = [u["flight"] for u in unexplained]
+    top = max(unexplained, key=lambda u: len(u["series"]))
+    a, b = top["peak_window_s"]
+    text = (f"the rest sits in flight{'s' if len(flights) > 1 else ''} {', '.join(flights)}, strongest at "
+            f"{a:.2f}–{b:.2f} s")
+    h = top.get("peak_height_m")
+    if h is not None:
+        text += f" (height {h[0]:.2f}–{h[1]:.2f} m)" if abs(h[1] - h[0]) >= 0.005 else f" (height {h[0]:.2f} m)"
+    if len(flights) > 1:
+        text += f" in flight {top['flight']}"
+    return text + f", in the {', '.join(SERIES_WORDS[s] for s in top['series'][:3])} residuals"
+
+
+def partial_words(result: dict) -> str:
+    """The partial explanation in words: what the adopted terms explain and where the rest sits.
+
+    Parameters
+    ----------
+    result : dict
+        ``diagnosis.json`` content with ``partial_explanation`` ({ids, share_explained, evidence}) and
+        ``unexplained``.
+
+    Returns
+    -------
+    str
+    """
+    pe = result["partial_explanation"]
+    names = " and ".join(effect_name(i) for i in pe["ids"])
+    verb = "explain" if len(pe["ids"]) > 1 else "explains"
+    return (f"{names[0].upper()}{names[1:]} {verb} {_share_text(pe['share_explained'])} of the excess misfit "
+            f"(ΔBIC {pe['evidence']:,.0f}); {_rest_text(result['unexplained'])}: the effect's form differs from "
+            "the library's (a different law, or a further effect of the same kind), so its estimate is that of "
+            "the nearest formula the library has.")
+
+
 def words(result: dict) -> str:
     """The diagnosis in words (printed by the command, shown in the report)."""
     lines = []
@@ -160,6 +212,9 @@ def words(result: dict) -> str:
         if skipped:
             lines.append("Not tried: " + ", ".join(f"{c} ({why})" for c, why in skipped.items()) + ".")
         return "\n".join(lines)
+    partial = result.get("partial_explanation")
+    if partial:
+        lines.append(partial_words(result))
     for e in result["effects"]:
         est = "; ".join(f"{n} = {_fmt(v['value'])} (95% {_fmt(v['q025'])} … {_fmt(v['q975'])})"
                         for n, v in e["estimate"].items())
@@ -177,7 +232,7 @@ def words(result: dict) -> str:
     if noise.get("ar1_explains") is False:
         lines.append(f"Correlated (AR(1)) marker noise was tried (ΔBIC {noise['ar1_evidence']:.0f} over white noise) "
                      "and leaves the structure below unexplained too, so it is not taken as the explanation.")
-    for u in result["unexplained"]:
+    for u in ([] if partial else result["unexplained"]):
         a, b = u["peak_window_s"]
         onset = u["model_follows_until_s"]
         if onset is not None:
@@ -191,9 +246,11 @@ def words(result: dict) -> str:
                      f"{a:.2f}–{b:.2f} s{when}. No term of the library removes it "
                      "(a gust, a collision, a sensor or tracking fault, or physics the library lacks?).")
     rejected = [c for c in result["candidates"] if c["status"] == "insufficient" and c["round"] == 1]
-    if result["unexplained"] and rejected:
+    if result["unexplained"] and rejected and not partial:
         lines.append("Not forced onto a term: " + ", ".join(
-            f"{c['id']} (ΔBIC {c['evidence']:.1f} but leaves structure)" for c in rejected[:4]) + ".")
+            f"{c['id']} (ΔBIC {c['evidence']:.1f} but leaves structure and removes only "
+            f"{_share_text(c.get('share_explained'))} of the excess misfit, less than {100 * SHARE_PARTIAL:.0f} %)"
+            for c in rejected[:4]) + ".")
     if skipped:
         lines.append("Not tried: " + ", ".join(f"{c} ({why})" for c, why in skipped.items()) + ".")
     return "\n".join(lines)
@@ -201,7 +258,9 @@ def words(result: dict) -> str:
 
 def _unexplained(diag: Diagnosis) -> list[dict]:
     """Flights whose residuals stay structured after the accepted terms: the series (most structured
-    first), the window where the structure is strongest, and the Ljung–Box p-values."""
+    first), the window where the structure is strongest (and the flight's height there), and the Ljung–Box
+    p-values. The onset search (when the model stops following the flight) locates a disturbance; it is
+    not run on the rest of a partial explanation, which acts wherever its effect does."""
     out = []
     final = diag.final
     names = [f.name for f in final.problem.flights]
@@ -212,10 +271,11 @@ def _unexplained(diag: Diagnosis) -> list[dict]:
         k = names.index(flight)
         loc = final.localisation[flight]
         series = sorted(series, key=lambda s: loc[s]["ljung_box_p"])
-        why = onset_unavailable(final.problem, k)
+        why = (PARTIAL_ONSET_NOTE if diag.partial else onset_unavailable(final.problem, k))
+        window = peak_window(final.residuals[k], final.ls.sigma)
         u = {"flight": flight, "series": series,
              "model_follows_until_s": onset_of_mismatch(final, k) if why is None else None,
-             "peak_window_s": peak_window(final.residuals[k], final.ls.sigma),
+             "peak_window_s": window, "peak_height_m": _window_height(final.residuals[k], window),
              "rms": rms[flight], "ljung_box_p": {s: loc[s]["ljung_box_p"] for s in series}}
         if flight in rms_mm:
             u["rms_mm"] = rms_mm[flight]
@@ -223,6 +283,23 @@ def _unexplained(diag: Diagnosis) -> list[dict]:
             u["onset_note"] = why
         out.append(u)
     return out
+
+
+#: why no onset is searched in the structure a partial explanation leaves
+PARTIAL_ONSET_NOTE = "not searched: the structure is the rest of a partially explained effect, not a disturbance"
+
+
+def _window_height(fr, window) -> list | None:
+    """[min, max] height [m] of the fitted flight over the time window [t0, t1] [s] (the ``height``
+    covariate of its first residual series that has one); None if none."""
+    for part in fr.parts:
+        h = part.covariates.get("height")
+        if h is None:
+            continue
+        sel = (part.times >= window[0]) & (part.times <= window[1]) & np.isfinite(h)
+        if sel.any():
+            return [float(np.min(h[sel])), float(np.max(h[sel]))]
+    return None
 
 
 def noise_scales(fit: ModelFit) -> dict:
@@ -309,7 +386,8 @@ def correlated_noise(cfg: RunConfig, diag: Diagnosis, build_for, candidates, pro
     return diag, {"model": "white", "ar1_evidence": gain, "ar1_rho": rho, "ar1_explains": False}, cfg
 
 
-def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progress: bool = True) -> dict:
+def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progress: bool = True,
+                 candidates=None) -> dict:
     """The ``diagnose`` command without its report (module docstring).
 
     Parameters
@@ -323,6 +401,8 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
         Parallel candidate fits.
     progress : bool
         Show a progress bar while resampling.
+    candidates : sequence of str, optional
+        The candidate ids to try (default: every one of ``CANDIDATES``); an unknown id is an error.
 
     Returns
     -------
@@ -332,6 +412,10 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
         docstring (``words``: the diagnosis in words).
     """
     t0 = time.perf_counter()
+    wanted = list(CANDIDATES if candidates is None else candidates)
+    unknown = [c for c in wanted if c not in CANDIDATES]
+    if unknown:
+        raise ValueError(f"unknown candidate(s) {unknown}; known: {list(CANDIDATES)}")
     out = Path(cfg.output)
     out.mkdir(parents=True, exist_ok=True)
     flights = load_run_flights(cfg)
@@ -350,7 +434,7 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
                            seed=cfg.sampler.seed)
     base = model_fit(problem, ls, base_ids)
     logger.info("base RMS " + rms_text(base.rms))
-    candidates, skipped = applicable_candidates(problem, [c for c in CANDIDATES if c not in base_ids])
+    candidates, skipped = applicable_candidates(problem, [c for c in wanted if c not in base_ids])
     for c, why in skipped.items():
         logger.info(f"not trying {c}: {why}")
     logger.info(f"ranking {len(candidates)} candidates by ΔBIC (each a least-squares refit):")
@@ -384,11 +468,15 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
         fp = fingerprint(base if rank == 0 else diag.accepted[rank - 1].fit, c.fit, new)
         result["effects"].append({"id": c.id, "evidence": c.delta_bic, "estimate": {n: after_est[n] for n in new},
                                   "where": describe_where(fp, problem.n_flights), "title": _title(c.id),
-                                  "status": c.status, "fingerprint": fp})
+                                  "status": "partially_explains" if diag.partial else c.status,
+                                  "share_explained": c.share, "fingerprint": fp})
     result["effects"].sort(key=lambda e: -e["evidence"])
     result["unexplained"] = _unexplained(diag)
+    result["partial_explanation"] = ({"ids": [c.id for c in diag.accepted], "share_explained": diag.share,
+                                      "evidence": float(sum(c.delta_bic for c in diag.accepted)),
+                                      "share_threshold": SHARE_PARTIAL} if diag.partial else None)
     result["shifted_coefficients"] = coefficient_shifts(before_est, after_est) if diag.accepted else []
-    result["candidates"] = [{"id": c.id, "evidence": c.delta_bic, "status": c.status,
+    result["candidates"] = [{"id": c.id, "evidence": c.delta_bic, "status": c.status, "share_explained": c.share,
                              "evidence_from_white_flights": c.clean_evidence, "per_flight_gain": c.per_flight_gain,
                              "extra_parameters": c.extra_parameters,
                              "round": r + 1, "rms_mm": c.fit.rms_mm, "rms": c.fit.rms,
@@ -402,12 +490,16 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
     result["noise_sigma_mm"] = {"before": {f: sig_b[s]["value"] * 1e3 for s, f in marker_sigma.items()},
                                 "after": {f: sig_a[s]["value"] * 1e3 for s, f in marker_sigma.items()}}
     result["noise_sigma"] = {"before": sig_b, "after": sig_a}
+    floor = noise_floor(base.residuals, base.problem.n_groups)
+    result["noise_floor"] = {n: {"value": float(v), "unit": sig_b[n]["unit"]}
+                             for n, v in zip(base.problem.sigma_names, floor)}
     result["coefficients_before"] = before_est
     result["coefficients_after"] = after_est
     result["model"] = {"base": list(base_ids), "final": list(final.ids)}
     if noise is not None:
         result["noise"] = noise
-    result["settings"] = {"evidence_threshold_delta_bic": EVIDENCE_THRESHOLD, "resampled": bool(diag.accepted and sample),
+    result["settings"] = {"evidence_threshold_delta_bic": EVIDENCE_THRESHOLD, "share_partial": SHARE_PARTIAL,
+                          "resampled": bool(diag.accepted and sample),
                           "refit_run": str(refit_dir) if diag.accepted and sample else None}
     result["words"] = words(result)
     result["wall_time_s"] = time.perf_counter() - t0

@@ -19,9 +19,31 @@ a ground effect or a roll term, each absorbing a little of it. A candidate is th
 if it also explains the mismatch: after it, the residual series of every flight (markers: six directions
 and three attitude angles; inertial: gyro and accelerometer along the sensor axes, :mod:`.residuals`) are
 white by Ljung–Box at a Bonferroni-corrected level.
-When no single candidate does, the strongest is combined with each of the others (at most two terms);
-structure that no candidate removes is reported as unexplained, with its flight, series and the time
-window where it is strongest.
+When no single candidate does, the strongest is combined with each of the others (at most two terms).
+
+Partial explanations. Nature rarely uses the library's formula: a ground effect that decays with another
+law is found by the ground-effect term (by far the largest ΔBIC) and still leaves structure. How much of
+the misfit a candidate accounts for is measured against a noise floor that does not need the right model,
+σ̂_g from the second differences of the base fit's residual series (:func:`.residuals.noise_floor`): the
+base model's excess misfit is E = Σ_g max(S_g,base − n_g σ̂_g², 0) and a candidate's share of it
+
+    share = Σ_g (S_g,base − S_g,cand) / E,   clipped to [0, 1],
+
+undefined (NaN) when E is within noise of zero (E ≤ ``EXCESS_MIN_SD`` standard deviations of Σ_g S_g
+under white noise, σ̂_g² √(2 n_g) per group): there is then no excess to share. A candidate is
+
+* ``explains``: ΔBIC > threshold and every flight's residuals white;
+* ``partially_explains``: ΔBIC > threshold, structure left, share ≥ ``SHARE_PARTIAL``;
+* ``insufficient``: ΔBIC > threshold, structure left, share below it (or undefined);
+* ``no_evidence``: ΔBIC ≤ threshold.
+
+Shares always refer to the base model (a pair's share is that of both terms together). When nothing
+explains the data, the best partial explanation is adopted as the diagnosis' effect — the strongest
+single candidate, or the strongest pair if its partner earns its place over the single (ΔBIC >
+threshold) and the pair's share is at least ``SHARE_PARTIAL`` — and the structure it leaves is reported
+as the rest of that effect, not as a disturbance no term describes. Structure that no candidate largely
+removes (a gust: localised in one flight, every candidate's share small) is reported as unexplained,
+with its flight, series and the time window where it is strongest.
 
 A candidate's fit starts from more places than the base fit did (:func:`candidate_starts`), so part of
 its gain can be a better optimum rather than better physics (inertial throws, with their many nuisance
@@ -45,7 +67,7 @@ from ..inference.model import Problem
 from ..observation.models.markers import MarkerPositions
 from ..observation.registry import DATA_EXPLANATION, MODEL_EXTENSIONS, unit
 from ..physics import TERMS, literature_coefficients
-from .residuals import ROTATIONS, channel_runs, flight_residuals, localise
+from .residuals import ROTATIONS, channel_runs, flight_residuals, localise, noise_floor
 
 #: every candidate, physics terms first
 CANDIDATES = MODEL_EXTENSIONS
@@ -61,6 +83,14 @@ PAIR_PARTNERS = 3
 BASE_REFITS = 2
 #: least improvement of the base (Σ_g n_g ln S_g) that replaces it
 BASE_REFIT_MIN = 2.0
+#: least share of the base model's excess misfit a candidate that leaves structure must remove to be
+#: adopted as a partial explanation (half: it then accounts for more of the mismatch than all else together)
+SHARE_PARTIAL = 0.5
+#: the excess misfit counts as zero (share undefined) below this many standard deviations of Σ_g S_g
+#: under white noise
+EXCESS_MIN_SD = 3.0
+#: candidate statuses, from best to worst
+STATUSES = ("explains", "partially_explains", "insufficient", "no_evidence")
 
 
 def applicable_candidates(problem: Problem, candidates=CANDIDATES) -> tuple[list, dict]:
@@ -100,6 +130,13 @@ class ModelFit:
     ss: np.ndarray
     residuals: list = field(default_factory=list)
     localisation: dict = field(default_factory=dict)
+
+    @property
+    def noise_floor(self) -> np.ndarray:
+        """n_g σ̂_g² (n_groups,) [unit²]: the sums of squares noise alone would give, σ̂_g from the second
+        differences of this fit's residual series (:func:`.residuals.noise_floor`)."""
+        sigma = noise_floor(self.residuals, self.problem.n_groups)
+        return self.problem.n_coords * sigma ** 2
 
     @property
     def rms(self) -> dict:
@@ -158,33 +195,100 @@ def evidence(base: ModelFit, cand: ModelFit, groups: np.ndarray | None = None) -
     return float(np.sum(gain[mask]) - k * np.log(np.sum(n[mask])))
 
 
+def excess_share(base_ss: np.ndarray, cand_ss: np.ndarray, floor: np.ndarray, n: np.ndarray,
+                 min_sd: float = EXCESS_MIN_SD) -> float:
+    """The share of the base model's excess misfit a candidate removes (module docstring).
+
+    share = Σ_g (S_g,base − S_g,cand) / Σ_g max(S_g,base − n_g σ̂_g², 0), clipped to [0, 1].
+
+    Parameters
+    ----------
+    base_ss, cand_ss : (n_groups,) arrays
+        Summed squared residuals S_g of the base model and of the candidate [unit²].
+    floor : (n_groups,) array
+        n_g σ̂_g²: what noise alone gives [unit²] (:attr:`ModelFit.noise_floor`).
+    n : (n_groups,) array
+        Residuals per group n_g.
+    min_sd : float
+        The excess counts as zero below this many standard deviations of Σ_g S_g under white noise
+        (Σ_g 2 n_g σ̂_g⁴)^½.
+
+    Returns
+    -------
+    float
+        The share in [0, 1]; NaN when the excess is zero (nothing to share) or the floor unknown.
+    """
+    base_ss, cand_ss, floor = (np.asarray(a, float) for a in (base_ss, cand_ss, floor))
+    n = np.asarray(n, float)
+    ok = np.isfinite(floor) & np.isfinite(base_ss) & np.isfinite(cand_ss)
+    if not ok.any():
+        return float("nan")
+    excess = float(np.sum(np.maximum(base_ss[ok] - floor[ok], 0.0)))
+    sd = float(np.sqrt(np.sum(2.0 * floor[ok] ** 2 / np.maximum(n[ok], 1.0))))     # σ̂⁴ √(2n) = floor² · 2/n
+    if excess <= min_sd * sd or excess <= 0.0:
+        return float("nan")
+    return float(np.clip(np.sum(base_ss[ok] - cand_ss[ok]) / excess, 0.0, 1.0))
+
+
 @dataclass
 class Candidate:
-    """One candidate judged against the model it extends."""
+    """One candidate judged against the model it extends (statuses: module docstring); ``share``: the
+    share of the base model's excess misfit it (with the terms it extends) removes, in [0, 1] or NaN."""
 
     id: str
     fit: ModelFit
     delta_bic: float
     per_flight_gain: dict
     structured_after: dict
-    status: str = ""          # explains | insufficient (leaves structure) | no_evidence
+    status: str = ""          # explains | partially_explains | insufficient | no_evidence
     clean_evidence: float = float("nan")
     extra_parameters: int = 0
+    share: float = float("nan")
 
 
-def judge(base: ModelFit, cand_id: str, fit: ModelFit, threshold: float = EVIDENCE_THRESHOLD) -> Candidate:
-    """The candidate's ΔBIC, per-flight gain Σ_{g ∈ flight} n_g ln(S_g,base/S_g,cand), whiteness after, and
-    status (explains | insufficient | no_evidence)."""
+def judge(base: ModelFit, cand_id: str, fit: ModelFit, floor: np.ndarray, threshold: float = EVIDENCE_THRESHOLD,
+          origin: ModelFit | None = None, share_partial: float = SHARE_PARTIAL) -> Candidate:
+    """One candidate judged against the model it extends.
+
+    Parameters
+    ----------
+    base : ModelFit
+        The model the candidate extends (the base, or the strongest single candidate in the pair round).
+    cand_id : str
+    fit : ModelFit
+        The fit of ``base`` extended by the candidate.
+    floor : (n_groups,) array
+        n_g σ̂_g² of the base model (:attr:`ModelFit.noise_floor`) [unit²].
+    threshold : float
+        ΔBIC the candidate must exceed over ``base``.
+    origin : ModelFit, optional
+        The base model of the diagnosis, whose excess misfit the share refers to; default ``base``.
+    share_partial : float
+        Least share of a partial explanation.
+
+    Returns
+    -------
+    Candidate
+        ΔBIC over ``base``, per-flight gain Σ_{g ∈ flight} n_g ln(S_g,base/S_g,cand), whiteness after, the
+        share of ``origin``'s excess misfit removed and the status (module docstring).
+    """
     p = base.problem
+    origin = base if origin is None else origin
     gain = p.n_coords * np.log(base.ss / fit.ss)
     c = Candidate(cand_id, fit, evidence(base, fit),
                   {f.name: float(np.sum(gain[p.flight_groups(k)])) for k, f in enumerate(p.flights)},
-                  structured(fit), extra_parameters=fit.problem.n_ext - p.n_ext)
+                  structured(fit), extra_parameters=fit.problem.n_ext - p.n_ext,
+                  share=excess_share(origin.ss, fit.ss, floor, p.n_coords))
     clean = np.array([not c.structured_after[f.name] for f in p.flights])
     if c.delta_bic <= threshold:
         c.status = "no_evidence"
     else:
-        c.status = "explains" if clean.all() else "insufficient"
+        if clean.all():
+            c.status = "explains"
+        elif np.isfinite(c.share) and c.share >= share_partial:
+            c.status = "partially_explains"
+        else:
+            c.status = "insufficient"
         if clean.any():
             mask = np.zeros(p.n_groups, bool)
             for k in np.flatnonzero(clean):
@@ -279,24 +383,55 @@ def refit_base(base: ModelFit, fits: dict, max_nfev: int = 200, threshold: float
 @dataclass
 class Diagnosis:
     """The outcome: base and final fits, every candidate judged (per round), the accepted ids and the
-    structure left unexplained."""
+    structure left unexplained.
+
+    ``partial``: the accepted terms are the best partial explanation (module docstring), so the structure
+    in ``unexplained`` is the rest of their effect; ``share``: the share of the base model's excess misfit
+    the accepted terms remove (NaN when none are accepted or the excess is zero)."""
 
     base: ModelFit
     final: ModelFit
     rounds: list            # [[Candidate ranked best first], ...]
     accepted: list          # [Candidate]
     unexplained: dict       # {flight: [series]}
+    partial: bool = False
+    share: float = float("nan")
 
     @property
     def verdict(self) -> str:
         return "missing_physics" if self.accepted or any(self.unexplained.values()) else "adequate"
 
 
+def best_partial(single: Candidate | None, pairs: list) -> list:
+    """The best partial explanation: [single, partner] when the strongest partner earns its place over the
+    single (ΔBIC > threshold: status other than ``no_evidence``) and the pair's share is at least
+    ``SHARE_PARTIAL`` (status ``partially_explains``); else [single] when the single partially explains;
+    else [].
+
+    Parameters
+    ----------
+    single : Candidate or None
+        The strongest single candidate (round 1).
+    pairs : list of Candidate
+        The partners judged against it (round 2), ranked best first.
+
+    Returns
+    -------
+    list of Candidate
+    """
+    if single is None:
+        return []
+    if pairs and pairs[0].status == "partially_explains":
+        return [single, pairs[0]]
+    return [single] if single.status == "partially_explains" else []
+
+
 def diagnose(base: ModelFit, build, processes: int = 1, max_nfev: int = 200, candidates=CANDIDATES,
              threshold: float = EVIDENCE_THRESHOLD, log=lambda msg: None) -> Diagnosis:
-    """Rank the candidates (module docstring), accept those that earn their place and explain the data."""
+    """Rank the candidates (module docstring), accept those that earn their place and explain the data, or
+    else adopt the best partial explanation."""
     current, accepted, rounds = base, [], []
-    pending = None
+    pending, floor = None, None
     ids = [c for c in candidates if c not in base.ids]
     for r in range(MAX_TERMS):
         if not ids:
@@ -311,23 +446,34 @@ def diagnose(base: ModelFit, build, processes: int = 1, max_nfev: int = 200, can
             log(f"  the base model refits to a better optimum from the {cid} fit (Σ n ln S lower by {gain:.1f}); "
                 "fitting the candidates again")
             fits = fit_candidates(current, build, ids, processes=processes, max_nfev=max_nfev)
-        ranked = sorted((judge(current, c, f, threshold) for c, f in fits.items()),
+        if floor is None:
+            floor = base.noise_floor
+        ranked = sorted((judge(current, c, f, floor, threshold, origin=base) for c, f in fits.items()),
                         key=lambda c: c.delta_bic, reverse=True)
         rounds.append(ranked)
-        log("  " + ", ".join(f"{c.id} ΔBIC {c.delta_bic:.1f} ({c.status})" for c in ranked))
+        log("  " + ", ".join(f"{c.id} ΔBIC {c.delta_bic:.1f} ({c.status}, share {c.share:.2f})" for c in ranked))
         good = [c for c in ranked if c.status == "explains"]
         if good:
             accepted += ([pending] if pending is not None else []) + [good[0]]
             break
-        if pending is not None or ranked[0].status != "insufficient":
+        if pending is not None or ranked[0].status not in ("insufficient", "partially_explains"):
             break
         # the strongest candidate leaves structure: try it together with each of the next strongest
         pending = ranked[0]
         current = ranked[0].fit
         ids = [c.id for c in ranked[1: 1 + PAIR_PARTNERS] if c.status != "no_evidence"]
+    partial = False
+    if not accepted:
+        accepted = best_partial(pending, rounds[1] if len(rounds) > 1 else [])
+        partial = bool(accepted)
+        if partial:
+            log("  no candidate leaves white residuals; adopting the best partial explanation: "
+                + " + ".join(c.id for c in accepted) + f" (share {accepted[-1].share:.2f} of the excess misfit)")
     final = accepted[-1].fit if accepted else base
     left = structured(final)
-    return Diagnosis(base=base, final=final, rounds=rounds, accepted=accepted, unexplained=left)
+    share = accepted[-1].share if accepted else float("nan")
+    return Diagnosis(base=base, final=final, rounds=rounds, accepted=accepted, unexplained=left, partial=partial,
+                     share=share)
 
 
 # -- onset of an unexplained mismatch -------------------------------------------------------------------

@@ -14,6 +14,23 @@ autocorrelation and the Ljung–Box statistic Q = n(n+2) Σ_{k=1..h} ρ_k² / (n
 (white residuals: p uniform; structure: p → 0); the time windows where the running mean strays beyond 3
 standard errors (σ of the series' noise group × its unit standard error); and the correlation of the
 residual with α, air speed, spin, height and time — the fingerprints the missing-physics ranking reads.
+
+Noise floor without the right model (:func:`noise_floor`). The second difference of a time-ordered series,
+Δ²x_t = x_{t+1} − 2x_t + x_{t−1}, of white noise with standard errors σ u_t has variance
+σ² (u_{t+1}² + 4u_t² + u_{t−1}²) (6σ² for u ≡ 1), whereas a smooth model error s(t) adds only about
+s''(t)² Δt⁴ to it: a sinusoid of frequency f and amplitude A adds A² (2πfΔt)⁴ / 2 on average, at
+Δt = 1/120 s 4e−6 A² for 1 Hz and 0.04 A² for a 10 Hz wobble. So, per noise group g, pooled
+over its primary series x (markers: the marker mean along, lateral, normal with u_t = 1/√(markers seen);
+inertial: the six sensor series),
+
+    σ̂_g² = Σ_x Σ_t (Δ²x_t)² / Σ_x Σ_t (u_{t+1}² + 4u_t² + u_{t−1}²),
+
+over the triples of finite samples. Assumption: the noise is white (independent in time) and the model
+error is smooth on the scale of three samples. Structure at the sample rate (vibration, tracking jitter,
+a sudden collision) is counted as noise, which makes the floor higher and the excess misfit smaller;
+positively correlated noise (AR(1) with ρ > 0) looks smooth and makes the floor lower — by the factor
+(6 − 8ρ + 2ρ²)/6 in σ², 0.11 at ρ = 0.85 — so that its correlation is counted as excess misfit (which no
+term removes: correlated noise is judged separately, :mod:`.diagnosis`).
 """
 from __future__ import annotations
 
@@ -28,7 +45,8 @@ from ..observation.models.markers import DIRECTIONS, ROTATIONS, flight_axes, mar
 from ..physics import flight_conditions
 
 __all__ = ["DIRECTIONS", "ROTATIONS", "FlightResiduals", "channel_runs", "flight_axes", "flight_residuals",
-           "ljung_box", "localise", "marker_series", "peak_window", "series_of", "structured_windows"]
+           "ljung_box", "localise", "marker_series", "noise_floor", "peak_window", "second_difference_variance",
+           "series_of", "structured_windows"]
 
 #: lags of the Ljung–Box statistic (about 0.1 s at 120 Hz)
 LJUNG_BOX_LAGS = 12
@@ -193,6 +211,60 @@ def peak_window(fr: FlightResiduals, sigma: np.ndarray, window: int = WINDOW) ->
     while hi < run.size - 1 and above[hi + 1]:
         hi += 1
     return [float(part.times[lo]), float(part.times[hi])]
+
+
+def second_difference_variance(x: np.ndarray, se: np.ndarray | None = None) -> tuple[float, float]:
+    """The sums of the second-difference noise estimate of one time-ordered series (module docstring).
+
+    Parameters
+    ----------
+    x : (n,) array
+        The series on an even time grid (NaN where nothing was recorded), in its unit.
+    se : (n,) array, optional
+        Standard error of each sample per unit noise scale (u_t); default 1.
+
+    Returns
+    -------
+    (float, float)
+        Σ_t (Δ²x_t)² [unit²] and Σ_t (u_{t+1}² + 4u_t² + u_{t−1}²) over the triples of finite samples:
+        their ratio estimates σ²; both 0 when the series has no such triple.
+    """
+    x = np.asarray(x, float)
+    u2 = np.ones(x.size) if se is None else np.asarray(se, float) ** 2
+    if x.size < 3:
+        return 0.0, 0.0
+    d2 = x[2:] - 2.0 * x[1:-1] + x[:-2]
+    w = u2[2:] + 4.0 * u2[1:-1] + u2[:-2]
+    ok = np.isfinite(d2) & np.isfinite(w)
+    return float(np.sum(d2[ok] ** 2)), float(np.sum(w[ok]))
+
+
+def noise_floor(residuals: list, n_groups: int) -> np.ndarray:
+    """σ̂_g of every noise group from the second differences of its primary residual series (module
+    docstring): an estimate of the noise that does not need the right model.
+
+    Parameters
+    ----------
+    residuals : list of FlightResiduals
+        Every flight's residual series (:func:`flight_residuals`) of any reasonable fit.
+    n_groups : int
+        Number of noise groups of the problem (``Problem.n_groups``).
+
+    Returns
+    -------
+    (n_groups,) array
+        σ̂_g in each group's unit; NaN for a group without a primary series of three finite samples.
+    """
+    num, den = np.zeros(n_groups), np.zeros(n_groups)
+    for fr in residuals:
+        for part, off in zip(fr.parts, fr.group_offsets):
+            for name in part.primary:
+                g = off + part.groups[name]
+                a, b = second_difference_variance(part.series[name], part.unit_se[name])
+                num[g] += a
+                den[g] += b
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 0, np.sqrt(num / np.where(den > 0, den, 1.0)), np.nan)
 
 
 def series_of(fr: FlightResiduals) -> dict:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from .sections import Raw, Section, esc, fmt, fmt_count, fmt_estimate, fmt_scaled, table
+from .sections import Raw, Section, esc, fmt, fmt_count, fmt_estimate, fmt_percent, fmt_scaled, table
 
 LIT_LABELS = {"potts_crowther": "Potts & Crowther 2000", "hummel2002": "Hummel & Hubbard 2002 (Table 2)"}
 #: the posterior interval of the first screen
@@ -159,11 +159,15 @@ def adequacy_verdict(diagnosis: dict | None, config_path, coverage: float | None
     named = ", ".join(f"{e.get('id')} (ΔBIC {_evidence(e.get('evidence'))})" for e in effects)
     unexplained = diagnosis.get("unexplained") or []
     flights = sorted({u.get("flight") for u in unexplained if isinstance(u, dict)})
+    partial = diagnosis.get("partial_explanation")
     parts = []
     if named:
-        parts.append(f"missing physics found: {named}")
+        parts.append(f"missing physics found: {named}" + (
+            f", explaining {fmt_percent(partial.get('share_explained'))} of the excess misfit; its form differs "
+            "from the library's" if isinstance(partial, dict) else ""))
     if flights:
-        parts.append(f"unexplained structure left in {', '.join(map(str, flights))}")
+        parts.append(f"{'the rest sits' if isinstance(partial, dict) else 'unexplained structure left'} in "
+                     f"{', '.join(map(str, flights))}")
     text = "; ".join(parts) or f"verdict {verdict}"
     refit = (diagnosis.get("settings") or {}).get("refit_run")
     tail = f" The coefficients above are those of the model without it; the refit is in {refit}." if (

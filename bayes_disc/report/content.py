@@ -476,7 +476,10 @@ def _diagnosis_figure(ctx, data: dict):
 def missing_physics_section(ctx) -> Section | None:
     data = ctx.run.extras.get("diagnosis")
     guide = ("Whether the residuals call for physics the model lacks (side force, wind, ground effect …): every "
-             "candidate of the library is fitted and must earn its place by ΔBIC and leave white residuals.")
+             "candidate of the library is fitted and must earn its place by ΔBIC; it explains the data when it "
+             "leaves white residuals, and partially explains them when it removes at least half of the excess "
+             "misfit (the misfit beyond the noise floor, estimated from second differences of the residuals) "
+             "but leaves structure: its form then differs from the library's.")
     if not data:
         return None     # not run: the first screen's model-adequacy line gives the command
     effects = [e for e in data.get("effects") or [] if isinstance(e, dict)]
@@ -485,9 +488,10 @@ def missing_physics_section(ctx) -> Section | None:
     words = "".join(f"<p>{esc(line)}</p>" for line in str(data.get("words", "")).splitlines())
     parts = [f"<p>Verdict: <b>{esc(data.get('verdict', '–'))}</b></p>", words]
     if effects:
-        parts.append(table(["effect", "ΔBIC", "estimate", "where"],
-                           [[e.get("id"), _fixed(e.get("evidence")), _estimate_text(e.get("estimate") or {}),
-                             e.get("where")] for e in effects]))
+        parts.append(table(["effect", "status", "share of excess misfit", "ΔBIC", "estimate", "where"],
+                           [[e.get("id"), e.get("status", "–"), fmt_percent(e.get("share_explained")),
+                             _fixed(e.get("evidence")), _estimate_text(e.get("estimate") or {}), e.get("where")]
+                            for e in effects]))
     parts.append("<h3>Fit before and after</h3>" + table(
         ["flight", "RMS before [mm]", "RMS after [mm]", "min Ljung–Box p before", "min Ljung–Box p after"],
         [[f, fmt(before.get(f)), fmt(after.get(f)), _min_p(wb.get(f, {})), _min_p(wa.get(f, {}))] for f in before]))
@@ -499,16 +503,19 @@ def missing_physics_section(ctx) -> Section | None:
               _fixed(s["shift_sd"], "+.1f")] for s in moved]))
     unexplained = data.get("unexplained") or []
     if unexplained:
-        parts.append("<h3>Unexplained</h3>" + table(
-            ["flight", "structured series", "largest at [s]", "model follows until [s]", "RMS [mm]"],
+        title = ("Structure the partial explanation leaves" if data.get("partial_explanation") else "Unexplained")
+        parts.append(f"<h3>{title}</h3>" + table(
+            ["flight", "structured series", "largest at [s]", "height there [m]", "model follows until [s]",
+             "RMS [mm]"],
             [[u["flight"], ", ".join(u["series"]), "–".join(f"{x:.2f}" for x in u["peak_window_s"]),
+              "–".join(f"{x:.2f}" for x in u["peak_height_m"]) if u.get("peak_height_m") else "–",
               fmt(u.get("model_follows_until_s")), fmt(u.get("rms_mm"))] for u in unexplained]))
     cands = data.get("candidates") or []
     if cands:
         parts.append("<h3>Every candidate</h3>" + table(
-            ["round", "candidate", "extra parameters", "ΔBIC", "status"],
-            [[c.get("round"), c.get("id"), c.get("extra_parameters"), _fixed(c.get("evidence")), c.get("status")]
-             for c in cands]))
+            ["round", "candidate", "extra parameters", "ΔBIC", "share of excess misfit", "status"],
+            [[c.get("round"), c.get("id"), c.get("extra_parameters"), _fixed(c.get("evidence")),
+              fmt_percent(c.get("share_explained")), c.get("status")] for c in cands]))
     fig = _diagnosis_figure(ctx, data)
     return Section("missing-physics", "Missing physics", guide, "".join(parts), [fig] if fig else [])
 
