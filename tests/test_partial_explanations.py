@@ -158,6 +158,7 @@ def make_other_law_run(folder, seed=3):
     return folder / "config.yaml"
 
 
+@pytest.mark.slow          # two flights, a base fit, three candidate fits and a pair round: 70–210 s
 def test_ground_effect_of_another_law_is_adopted_as_a_partial_explanation(tmp_path):
     result = run_diagnose(load_config(make_other_law_run(tmp_path)), sample=False, processes=1, candidates=TRIED)
     words = result["words"]
