@@ -29,7 +29,7 @@ PERIOD0 = 0.0125                         # nominal period given to the model (th
 def throws(cy: float, seed: int):
     """Synthetic logs of LAUNCHES with a side force CY (0: none)."""
     rng = np.random.default_rng(seed)
-    terms, ext = (get_terms(["side_force"]), np.array([cy])) if cy else ((), None)
+    terms, ext = (get_terms(["side_force"]), np.array([cy, 1.0])) if cy else ((), None)
     return [synthetic_log(ls.name, ls.initial_state(), COEF, ls.duration, SPEC, rng, terms=terms, extension=ext)
             for ls in LAUNCHES]
 

@@ -8,7 +8,7 @@ from bayes_disc.inference.layout import IC_NAMES, ParameterLayout
 from bayes_disc.inference.model import Problem
 from bayes_disc.observation.markers import FlightObservation
 from bayes_disc.observation.models import MarkerPositions, ObservationModel
-from bayes_disc.observation.registry import (DATA_EXPLANATION, MODEL_EXTENSIONS, OBSERVATION_MODEL, PHYSICS_TERM,
+from bayes_disc.observation.registry import (DATA_EXPLANATION, LEARNED, MODEL_EXTENSIONS, OBSERVATION_MODEL, PHYSICS_TERM,
                                              UNITS, split_extensions, unit)
 from bayes_disc.observation.synth import DEFAULT_MARKERS, LaunchSpec, SynthSpec, synthesize
 from bayes_disc.physics import COEFFICIENT_NAMES, TERMS, Disc, Environment
@@ -37,9 +37,9 @@ def test_layout_names_slices_and_units_agree():
     own = ((), (unit("side_force").obj.parameters[0],))     # flight b carries one own parameter
     L = ParameterLayout(terms=terms, explanation_parameters=ep, flight_names=("a", "b"), flight_parameters=own)
     names, units = L.names, L.units
-    assert len(names) == len(units) == L.dim == 10 + 4 + 2 + 12 + 13
+    assert len(names) == len(units) == L.dim == 10 + 7 + 2 + 12 + 13
     assert names[:10] == list(COEFFICIENT_NAMES)
-    assert names[L.term_slice] == ["wind_x", "wind_y", "wind_z", "CY"]
+    assert names[L.term_slice] == ["wind_x", "wind_y", "wind_z", "shear_x", "shear_y", "CY", "n_Y"]
     assert names[L.explanation_slice] == ["dt_1", "dt_2"]
     assert names[L.ic_slice(1)] == [f"{n}_b" for n in IC_NAMES]
     assert names[L.own_slice(1)] == ["CY_b"] and L.own_slice(0).stop == L.own_slice(0).start
@@ -61,20 +61,20 @@ def test_transfer_and_kernel_extension():
     ext = small.kernel_extension(theta[None], tuple(TERMS.values()))
     flat = [p for t in TERMS.values() for p in t.parameters]
     for j, p in enumerate(flat):
-        assert ext[0, j] == (theta[small.index("CY")] if p.name == "CY" else p.off_value)
+        assert ext[0, j] == (theta[small.index(p.name)] if p.name in ("CY", "n_Y") else p.off_value)
     with pytest.raises(ValueError, match="lacks the model's terms"):
         big.kernel_extension(out[None], split_extensions(["side_force"])[0])
 
 
 def test_registry_knows_every_unit_once_and_rejects_unknown_ids():
     kinds = {u.kind for u in UNITS.values()}
-    assert kinds == {PHYSICS_TERM, DATA_EXPLANATION, OBSERVATION_MODEL}
+    assert kinds == {PHYSICS_TERM, DATA_EXPLANATION, OBSERVATION_MODEL, LEARNED}
     assert set(MODEL_EXTENSIONS) == {"side_force", "wind", "ground_effect", "nonlinear_aero", "spin_lift",
                                      "roll_spin_coupling", "marker_geometry", "time_offset"}
     assert unit("markers").kind == OBSERVATION_MODEL
     with pytest.raises(KeyError, match="known: "):
         unit("magic")
-    with pytest.raises(KeyError, match="unknown physics term or data explanation 'markers'"):
+    with pytest.raises(KeyError, match="unknown physics term or data explanation or learned correction 'markers'"):
         split_extensions(["markers"])
     assert unit("marker_geometry").parameter_names(("p", "q", "r"))[:3] == ("marker_b1_p", "marker_b2_p",
                                                                             "marker_b3_p")

@@ -39,9 +39,11 @@ CONCEALED = {
 }
 
 
-def make_run(folder: Path, physics: dict, seed: int, gust: dict | None = None, markers: dict | None = None) -> Path:
-    """Synthesize the three flights with ``physics`` (hidden from the run's config) into ``folder``; returns
-    the run's config path. ``gust`` is added to flight a; ``markers`` are the true body positions."""
+def make_run(folder: Path, physics: dict, seed: int, gust: dict | None = None, markers: dict | None = None,
+             nature: dict | None = None) -> Path:
+    """Synthesize the three flights with ``physics`` and ``nature`` (hidden from the run's config) into
+    ``folder``; returns the run's config path. ``gust`` is added to flight a; ``markers`` are the true body
+    positions."""
     folder.mkdir(parents=True, exist_ok=True)
     flights = [dict(f, noise_mm=NOISE_MM, dropout=0.02) for f in FLIGHTS]
     if gust:
@@ -50,6 +52,8 @@ def make_run(folder: Path, physics: dict, seed: int, gust: dict | None = None, m
                  output=dict(markers="flights.csv", truth="truth.json"))
     if markers:
         synth["markers"] = markers
+    if nature:
+        synth["nature"] = nature
     (folder / "synth.yaml").write_text(yaml.safe_dump(synth))
     assert main(["synth", str(folder / "synth.yaml")]) == 0
     config = dict(name="t", flights=[dict(file="flights.csv")], markers=DEFAULT_MARKERS, prior="potts_crowther",
@@ -58,8 +62,8 @@ def make_run(folder: Path, physics: dict, seed: int, gust: dict | None = None, m
     return folder / "config.yaml"
 
 
-def diagnose(cfg_path: Path) -> dict:
-    return run_diagnose(load_config(cfg_path), sample=False, processes=1)
+def diagnose(cfg_path: Path, candidates=None) -> dict:
+    return run_diagnose(load_config(cfg_path), sample=False, processes=1, candidates=candidates)
 
 
 def pooled_ratio(rms: dict) -> float:
@@ -121,16 +125,17 @@ def test_evidence_charges_for_parameters(tmp_path):
     theta = base_p.prior_mean + 0.01
     x = extend_theta(theta, base_p, cand_p)
     assert np.array_equal(x[:10], theta[:10]) and np.array_equal(x[cand_p.ic_start:], theta[base_p.ic_start:])
-    assert np.array_equal(x[10:13], np.zeros(3))
+    k = cand_p.n_ext                                  # wind: three components and two shears
+    assert k == 5 and np.array_equal(x[10:10 + k], np.zeros(k))
 
     class Fit:
         def __init__(self, problem, ss):
             self.problem, self.ss = problem, np.asarray(ss, float)
     n = base_p.n_coords
     same = evidence(Fit(base_p, [1.0, 2.0, 3.0]), Fit(cand_p, [1.0, 2.0, 3.0]))
-    assert same == pytest.approx(-3 * np.log(n.sum()))
+    assert same == pytest.approx(-k * np.log(n.sum()))
     better = evidence(Fit(base_p, [1.0, 2.0, 3.0]), Fit(cand_p, [0.5, 2.0, 3.0]))
-    assert better == pytest.approx(n[0] * np.log(2.0) - 3 * np.log(n.sum()))
+    assert better == pytest.approx(n[0] * np.log(2.0) - k * np.log(n.sum()))
 
 
 # -- end to end ---------------------------------------------------------------------------------------

@@ -76,8 +76,10 @@ def test_mirrored_throw_gives_mirrored_path():
 
 
 #: parameter values that make each term's effect clearly visible over 1.5 s
-TERM_VALUES = {"side_force": [0.3], "wind": [1.5, -2.0, 0.3], "ground_effect": [0.4, 0.2],
-               "nonlinear_aero": [-1.5, 1.0, 0.3], "spin_lift": [0.3], "roll_spin_coupling": [0.02]}
+#: (shape parameters of the families away from their off values too)
+TERM_VALUES = {"side_force": [0.3, 0.8], "wind": [1.5, -2.0, 0.3, 0.5, -0.4], "ground_effect": [0.4, 0.2, 0.3],
+               "nonlinear_aero": [-1.5, 1.0, 0.3, 1.0, -2.0, 0.5], "spin_lift": [0.3, 1.2],
+               "roll_spin_coupling": [0.02, 0.9]}
 
 
 @pytest.mark.parametrize("terms", [(), ("side_force", "wind"), ("ground_effect",), ("nonlinear_aero",),
@@ -119,7 +121,7 @@ def test_ground_effect_acts_near_the_ground_only():
         y0 = _state(pqr=(0.0, 0.0, 50.0))
         y0[2] = z0
         base = simulate(y0, HUMMEL, t, marker_body=MARKERS)
-        on = simulate(y0, HUMMEL, t, marker_body=MARKERS, terms=(term,), extension=[0.4, 0.0])
+        on = simulate(y0, HUMMEL, t, marker_body=MARKERS, terms=(term,), extension=[0.4, 0.0, 0.0])
         rise.append(on.markers[0, -1, :, 2].mean() - base.markers[0, -1, :, 2].mean())
     assert rise[0] > 0.005 and abs(rise[1]) < 0.1 * rise[0], rise
 
@@ -128,8 +130,8 @@ def test_terms_change_the_flight():
     y0 = _state()
     t = np.arange(121) / 120.0
     base = simulate(y0, HUMMEL, t)
-    side = simulate(y0, HUMMEL, t, terms=get_terms(["side_force"]), extension=[0.5])
-    off = simulate(y0, HUMMEL, t, terms=get_terms(["side_force"]), extension=[0.0])
+    side = simulate(y0, HUMMEL, t, terms=get_terms(["side_force"]), extension=[0.5, 1.0])
+    off = simulate(y0, HUMMEL, t, terms=get_terms(["side_force"]), extension=[0.0, 1.0])
     assert np.abs(off.states - base.states).max() < 1e-12
     # positive spin (r > 0) pushes to the right: −y in the world frame
     assert side.states[0, -1, 1] < base.states[0, -1, 1] - 0.01
@@ -170,7 +172,7 @@ def test_flight_conditions_match_the_model_with_and_without_wind():
     coef, disc, env = literature_coefficients("hummel2002"), Disc(), Environment()
     wind = np.array([-3.0, 2.0, 0.5])
     terms = (TERMS["side_force"], TERMS["wind"])
-    ext = np.concatenate([[0.1], wind])
+    ext = np.concatenate([[0.1, 1.0], wind, [0.0, 0.0]])
     cond = flight_conditions(states[None], times, terms, ext)
     no_wind = flight_conditions(states, times)
     for i, y in enumerate(states):
@@ -204,7 +206,7 @@ def test_one_extension_vector_serves_a_whole_batch():
     terms = get_terms(["wind", "side_force"])
     y0 = np.stack([_state(speed=s) for s in (11.0, 13.0, 15.0)])
     t = np.arange(0.0, 0.3, 1 / 120)
-    ext = np.array([1.0, -2.0, 0.3, 0.05])
+    ext = np.array([1.0, -2.0, 0.3, 0.0, 0.0, 0.05, 1.0])
     batch = simulate(y0, HUMMEL, t, terms=terms, extension=ext)
     off = simulate(y0, HUMMEL, t, terms=terms)
     for b in range(3):

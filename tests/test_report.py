@@ -20,7 +20,7 @@ from bayes_disc.report.context import ReportContext, load_run
 from bayes_disc.report.html import render_document
 from bayes_disc.report.run import build_sections
 from bayes_disc.report.sections import fmt_estimate
-from bayes_disc.report.windtunnel import load_wind_tunnel
+from bayes_disc.physics.windtunnel import load_wind_tunnel
 
 from conftest import require_outside_input
 

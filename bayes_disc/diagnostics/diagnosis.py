@@ -45,9 +45,12 @@ from ..inference.leastsq import fit_least_squares, refine_least_squares
 from ..inference.run import RESULT, run_sample
 from ..observation.registry import unit
 from ..physics import COEFFICIENT_NAMES
+from ..physics.discrepancy import coefficient_curve
 from .missing_physics import (CANDIDATES, EVIDENCE_THRESHOLD, SHARE_PARTIAL, Diagnosis, ModelFit,
                               applicable_candidates, describe_where, diagnose, fingerprint, model_fit)
 from .missing_physics import SERIES_WORDS, onset_of_mismatch, onset_unavailable
+from .discrepancy import Z_KEEP, LearnedDiscrepancy, family_of, learn_discrepancy
+from .missing_physics import structured
 from .residuals import noise_floor, peak_window
 
 logger = logging.getLogger(__name__)
@@ -256,6 +259,99 @@ def words(result: dict) -> str:
     return "\n".join(lines)
 
 
+#: points of a learned curve
+CURVE_POINTS = 41
+
+
+def _curve_grid(learned: LearnedDiscrepancy, variable: str) -> np.ndarray:
+    """Grid over the flown range of ``variable`` (5th–95th percentile; height from the ground)."""
+    lo, _, hi = learned.flown[variable]
+    if variable == "height":
+        lo = 0.0
+    return np.linspace(lo, hi, CURVE_POINTS)
+
+
+def _family_fit(diag: Diagnosis, family: str | None):
+    """(term, fitted values) of the library family ``family`` from its candidate fit in round 1, or None."""
+    if family is None or not diag.rounds:
+        return None
+    cand = next((c for c in diag.rounds[0] if c.id == family), None)
+    if cand is None or unit(family).kind != "physics term":
+        return None
+    theta = dict(zip(cand.fit.problem.names, cand.fit.ls.theta))
+    term = unit(family).obj
+    return term, [float(theta[p.name]) for p in term.parameters]
+
+
+def learned_record(learned: LearnedDiscrepancy, diag: Diagnosis) -> dict:
+    """The learned correction for ``diagnosis.json``: columns with values and sd, ΔBIC, whiteness, RMS after,
+    its concentration per flight variable and direction, the variable and family it names (or null), and
+    its curve along the strongest variable in the main direction — beside the curve of the library family
+    fitted as a candidate, where there is one."""
+    variable = learned.variable or max((v for v in learned.concentration if v != "constant"),
+                                       key=lambda v: learned.concentration[v], default=None)
+    direction = learned.direction
+    rec = {"selected": len(learned.names),
+           "columns": {n: {"value": float(v), "sd": float(s)} for n, v, s in zip(learned.names, learned.values,
+                                                                                   learned.sd)},
+           "evidence": learned.delta_bic, "white": learned.white, "rms_after_mm": learned.fit.rms_mm,
+           "rms_after": learned.fit.rms, "concentration": learned.concentration,
+           "direction_share": learned.direction_share, "variable": learned.variable, "direction": direction,
+           "family": learned.family, "flown": learned.flown,
+           "structured_after": structured(learned.fit), "curve": None}
+    if variable is not None and direction is not None:
+        grid = _curve_grid(learned, variable)
+        value, sd = learned.curve(direction, variable, grid)
+        curve = {"variable": variable, "direction": direction, "grid": grid, "value": value, "sd": sd,
+                 "state": {v: learned.flown[v][1] for v in learned.flown}, "family": None}
+        fam = _family_fit(diag, family_of(variable, direction))
+        if fam is not None:
+            term, vals = fam
+            curve["family"] = {"id": term.id, "parameters": dict(zip(term.parameter_names, vals)),
+                               "value": coefficient_curve(term, vals, direction, variable, grid, curve["state"],
+                                                          diag.base.problem.disc)}
+        rec["curve"] = curve
+    return rec
+
+
+def learned_words(result: dict) -> str | None:
+    """The learned correction in words, or None when none was learned."""
+    ld = result.get("learned_discrepancy")
+    if not ld:
+        return None
+    if not ld.get("selected"):
+        return f"A correction learned in height, α and spin finds nothing significant ({ld['reason']})."
+    conc = sorted(ld["concentration"].items(), key=lambda t: -t[1])
+    where = ", ".join(f"{v} {100 * s:.0f} %" for v, s in conc)
+    text = (f"A correction learned in functions of height, α and spin ({ld['selected']} of them selected, ΔBIC "
+            f"{ld['evidence']:,.0f}) {'leaves white residuals' if ld['white'] else 'still leaves structure'}; "
+            f"its evidence lies in {where}, mostly in {ld['direction']}")
+    fam = ld.get("family")
+    if fam and ld["white"]:
+        text += f": the missing physics is a function of {ld['variable']}, the {effect_name(fam)} family"
+        curve = ld.get("curve") or {}
+        named = [e["id"] for e in result.get("effects") or []]
+        if fam in named and curve.get("family") is not None:
+            text += " named above" + (", whose fitted form it follows" if _follows(curve) else
+                                      f"; its {ld['direction']} curve departs from the fitted {effect_name(fam)} "
+                                      "form beyond two standard deviations (see the report's curve)")
+        text += "."
+    elif not ld["white"]:
+        text += (": the mismatch is not a smooth function of the flight state the library's terms use "
+                 "(a disturbance, or physics outside these variables).")
+    else:
+        text += ": spread over several flight variables, it names no single family."
+    return text
+
+
+def _follows(curve: dict) -> bool:
+    """Whether the learned curve and the fitted family's agree within 2 sd (+ 10 % of the curve's range)."""
+    value, sd = (np.asarray(curve["value"], float), np.asarray(curve["sd"], float))
+    fam = np.asarray(curve["family"]["value"], float)
+    tol = 2 * sd + 0.1 * (np.ptp(value) + 1e-12)
+    return bool(np.all(np.abs(value - fam) <= tol))
+
+
 def _unexplained(diag: Diagnosis) -> list[dict]:
     """Flights whose residuals stay structured after the accepted terms: the series (most structured
     first), the window where the structure is strongest (and the flight's height there), and the Ljung–Box
@@ -387,7 +483,7 @@ def correlated_noise(cfg: RunConfig, diag: Diagnosis, build_for, candidates, pro
 
 
 def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progress: bool = True,
-                 candidates=None) -> dict:
+                 candidates=None, learn: bool = True) -> dict:
     """The ``diagnose`` command without its report (module docstring).
 
     Parameters
@@ -403,6 +499,9 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
         Show a progress bar while resampling.
     candidates : sequence of str, optional
         The candidate ids to try (default: every one of ``CANDIDATES``); an unknown id is an error.
+    learn : bool
+        When the base model leaves structure, learn a correction (:mod:`.discrepancy`) and report it under
+        ``learned_discrepancy``.
 
     Returns
     -------
@@ -501,6 +600,12 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
     result["settings"] = {"evidence_threshold_delta_bic": EVIDENCE_THRESHOLD, "share_partial": SHARE_PARTIAL,
                           "resampled": bool(diag.accepted and sample),
                           "refit_run": str(refit_dir) if diag.accepted and sample else None}
+    result["learned_discrepancy"] = None
+    if learn and any(structured(base).values()):
+        logger.info("the base model leaves structure: learning a correction in height, α and spin")
+        learned = learn_discrepancy(base, build_for(cfg), max_nfev=cfg.least_squares.max_nfev, log=logger.info)
+        result["learned_discrepancy"] = learned_record(learned, diag) if learned is not None else {
+            "selected": 0, "reason": f"no column of the correction reaches |z| ≥ {Z_KEEP:.0f}"}
     result["words"] = words(result)
     result["wall_time_s"] = time.perf_counter() - t0
     (out / "diagnosis.json").write_text(json.dumps(_finite(result), indent=1, allow_nan=False))

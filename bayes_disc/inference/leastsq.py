@@ -57,13 +57,16 @@ def whitened_residuals(x: np.ndarray, problem: Problem, sigma: np.ndarray) -> np
     return np.concatenate(parts)
 
 
-def whitened_jacobian(x: np.ndarray, problem: Problem, sigma: np.ndarray) -> np.ndarray:
-    """Central differences, one batched simulation per flight (2 lanes per parameter it depends on)."""
+def whitened_jacobian(x: np.ndarray, problem: Problem, sigma: np.ndarray, free: np.ndarray | None = None) -> np.ndarray:
+    """Central differences, one batched simulation per flight (2 lanes per parameter it depends on); with
+    ``free`` (dim,) bool, the columns of held parameters are zero (not computed)."""
     h = _steps(problem, x)
     rows = []
     n_x = x.size
     for k in range(problem.n_flights):
         cols = problem.flight_columns(k)
+        if free is not None:
+            cols = cols[free[cols]]
         lanes = np.repeat(x[None], 2 * cols.size, axis=0)
         lanes[np.arange(cols.size), cols] += h[cols]
         lanes[cols.size + np.arange(cols.size), cols] -= h[cols]
@@ -139,18 +142,46 @@ def fit_least_squares(problem: Problem, starts: int = 4, max_nfev: int = 200, se
     return out
 
 
-def refine_least_squares(problem: Problem, x0: np.ndarray, max_nfev: int = 200, rounds: int = 2) -> LeastSquaresResult:
+def refine_least_squares(problem: Problem, x0: np.ndarray, max_nfev: int = 200, rounds: int = 2,
+                         free: np.ndarray | None = None) -> LeastSquaresResult:
     """From x0: estimate each flight's σ from its residuals and refit (``rounds`` times), then the
-    Gauss–Newton covariance at the optimum."""
-    x, nfev, res = np.asarray(x0, float), 0, None
+    Gauss–Newton covariance at the optimum.
+
+    Parameters
+    ----------
+    problem : Problem
+    x0 : (dim,) array
+        Start.
+    max_nfev : int
+        Evaluation budget of each round.
+    rounds : int
+        σ re-estimations.
+    free : (dim,) bool array, optional
+        Parameters fitted; the others are held at their ``x0`` values (their covariance rows and columns
+        are zero). Default: all.
+
+    Returns
+    -------
+    LeastSquaresResult
+    """
+    x, nfev, res = np.asarray(x0, float).copy(), 0, None
+    free = np.ones(x.size, bool) if free is None else np.asarray(free, bool)
+
+    def full(xf):
+        out = x.copy()
+        out[free] = xf
+        return out
+
     for _ in range(rounds):
         sigma = _rms(problem, x)
-        res = least_squares(whitened_residuals, x, jac=whitened_jacobian, args=(problem, sigma), method="trf",
-                            x_scale=problem.prior_sd, max_nfev=max_nfev, xtol=1e-12, ftol=1e-12)
-        x, nfev = res.x, nfev + res.nfev
+        res = least_squares(lambda xf, s=sigma: whitened_residuals(full(xf), problem, s), x[free],
+                            jac=lambda xf, s=sigma: whitened_jacobian(full(xf), problem, s, free)[:, free],
+                            method="trf", x_scale=problem.prior_sd[free], max_nfev=max_nfev, xtol=1e-12, ftol=1e-12)
+        x, nfev = full(res.x), nfev + res.nfev
     sigma = _rms(problem, x)
-    J = whitened_jacobian(x, problem, sigma)
-    cov = covariance_from_jacobian(J)
+    J = whitened_jacobian(x, problem, sigma, free)[:, free]
+    cov = np.zeros((x.size, x.size))
+    cov[np.ix_(free, free)] = covariance_from_jacobian(J)
     cost = float(0.5 * np.sum(whitened_residuals(x, problem, sigma) ** 2))
     return LeastSquaresResult(theta=x, sigma=sigma, cov=cov, cost=cost, condition_number=condition_number(J),
                               start_costs=[], nfev=int(nfev), message=str(res.message) if res else "",

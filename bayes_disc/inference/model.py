@@ -259,7 +259,7 @@ class Problem:
         for i, n in enumerate(COEFFICIENT_NAMES):
             mean[i], sd[i] = cp.mean[n], cp.sd[n]
         for j, p in enumerate(L.ext_parameters, start=self.n_coef):
-            mean[j], sd[j] = p.off_value, p.prior_sd
+            mean[j], sd[j] = p.prior_centre, p.prior_sd
         for k in range(self.n_flights):
             mean[L.ic_slice(k)] = self.state_to_ic(self.start_states[k], k)
             sd[L.ic_slice(k)] = L.flight_ic[k].prior_sd

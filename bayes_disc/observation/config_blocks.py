@@ -1,7 +1,7 @@
 """Configuration blocks shared by run configurations and synthetic-flight descriptions.
 
 ``disc``/``environment`` (physical constants), ``markers`` (body-frame marker positions) and ``physics``
-(extra model terms and data explanations). Each reader takes the file path (named in errors) and the
+(extra model terms and data explanations), ``nature`` (forms of physics outside the library, synth files only). Each reader takes the file path (named in errors) and the
 :class:`~.config_io.Section` being read, and raises :class:`~.config_io.ConfigError` naming the key.
 """
 from __future__ import annotations
@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..physics import Disc, Environment
+from ..physics.nature import get_nature
 from .config_io import ConfigError, Section
 from .registry import DATA_EXPLANATION, PHYSICS_TERM, unit
 
@@ -99,5 +100,36 @@ def read_physics(path, sec: Section, marker_ids=None) -> dict:
             raise ConfigError(path, f"physics.{tid}", e.args[0]) from None
         s = Section(path, params, f"physics.{tid}")
         out[tid] = {p.name: s.number(p.name, p.off_value) for p in parameters}
+        s.finish()
+    return out
+
+
+def read_nature(path, sec: Section) -> dict:
+    """The ``nature:`` block of a synth file: form id (:data:`~..physics.nature.NATURE`) → {parameter: value}
+    (a parameter not given: its default).
+
+    Parameters
+    ----------
+    path : str or Path
+        The configuration file (named in errors).
+    sec : Section
+        The top-level mapping being read.
+
+    Returns
+    -------
+    dict
+        ``{form id: {parameter name: value}}``.
+    """
+    raw = sec.raw("nature", {}) or {}
+    if not isinstance(raw, dict):
+        raise ConfigError(path, "nature", "must map forms of nature to their parameters")
+    out = {}
+    for nid, params in raw.items():
+        try:
+            (form,) = get_nature([str(nid)])
+        except KeyError as e:
+            raise ConfigError(path, f"nature.{nid}", e.args[0]) from None
+        s = Section(path, params or {}, f"nature.{nid}")
+        out[nid] = {p.name: s.number(p.name, p.off_value) for p in form.parameters}
         s.finish()
     return out

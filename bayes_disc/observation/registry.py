@@ -11,12 +11,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..physics import TERMS, Term, TermParameter
+from ..physics.discrepancy import DISCREPANCY
 from .explanations import EXPLANATIONS, DataExplanation
 from .models import MarkerPositions
 
 PHYSICS_TERM = "physics term"
 DATA_EXPLANATION = "data explanation"
 OBSERVATION_MODEL = "observation model"
+#: a correction learned by ``diagnose`` (:mod:`bayes_disc.physics.discrepancy`): a physics term, but neither a
+#: missing-physics candidate nor something a run's configuration can ask for
+LEARNED = "learned correction"
 
 #: observation-model classes by id
 OBSERVATION_MODELS = {m.id: m for m in (MarkerPositions,)}
@@ -35,7 +39,7 @@ class Unit:
 
     def parameters(self, marker_ids: tuple = ()) -> tuple[TermParameter, ...]:
         """The unit's parameters shared by all flights (explanations depend on the marker ids)."""
-        if self.kind == PHYSICS_TERM:
+        if self.kind in (PHYSICS_TERM, LEARNED):
             return self.obj.parameters
         if self.kind == DATA_EXPLANATION:
             return self.obj.parameters_for(tuple(marker_ids))
@@ -49,6 +53,7 @@ UNITS: dict[str, Unit] = {
     **{t.id: Unit(t.id, PHYSICS_TERM, t.title, t.equations, t) for t in TERMS.values()},
     **{e.id: Unit(e.id, DATA_EXPLANATION, e.title, e.equations, e) for e in EXPLANATIONS.values()},
     **{m.id: Unit(m.id, OBSERVATION_MODEL, m.title, m.equations, m) for m in OBSERVATION_MODELS.values()},
+    DISCREPANCY.id: Unit(DISCREPANCY.id, LEARNED, DISCREPANCY.title, DISCREPANCY.equations, DISCREPANCY),
 }
 
 #: ids a model can be extended by (the missing-physics candidates), in registry order
@@ -65,7 +70,8 @@ def unit(uid: str, kinds: tuple[str, ...] | None = None) -> Unit:
 
 
 def split_extensions(ids) -> tuple[tuple[Term, ...], tuple[DataExplanation, ...]]:
-    """Model-extension ids → (physics terms, data explanations), each in the order given."""
-    units = [unit(i, (PHYSICS_TERM, DATA_EXPLANATION)) for i in ids]
-    return (tuple(u.obj for u in units if u.kind == PHYSICS_TERM),
+    """Model-extension ids → (physics terms, data explanations), each in the order given (the learned
+    discrepancy counts as a physics term)."""
+    units = [unit(i, (PHYSICS_TERM, DATA_EXPLANATION, LEARNED)) for i in ids]
+    return (tuple(u.obj for u in units if u.kind in (PHYSICS_TERM, LEARNED)),
             tuple(u.obj for u in units if u.kind == DATA_EXPLANATION))

@@ -7,7 +7,10 @@ backhand) and optional wobble rates p, q [rad/s]; flight time [s], per-flight ma
 dropout fraction. Extra physics terms (``physics:``) make data with effects the base model lacks; a
 per-flight ``gust`` (a wind that blows only during a time window of one flight) makes a disturbance
 that no term of the library describes; ``marker_geometry`` and ``time_offset`` in ``physics:`` make
-recordings whose markers sit elsewhere on the disc or are recorded at shifted times.
+recordings whose markers sit elsewhere on the disc or are recorded at shifted times. ``nature:`` adds
+forms of physics that no formula of the library has (:mod:`bayes_disc.physics.nature`: a ground effect
+with another decay law, the wind-tunnel table's α-dependence, a power-law wind shear, a saturating side
+force), to see what ``diagnose`` makes of effects that do not follow the library's formulas.
 Output: a SPEC §4 marker file and a truth JSON (coefficients, terms, initial states, noise).
 
 An ``imu:`` block adds what an inertial logger fixed in the disc records during the same flights
@@ -31,9 +34,10 @@ import numpy as np
 from ..physics import (COEFFICIENT_NAMES, LITERATURE, Coefficients, Disc, Environment, Trajectories, get_terms,
                        literature_coefficients, simulate)
 from ..physics.conditions import flight_conditions
+from ..physics.nature import get_nature
 from ..physics.frames import (attitude_from_yaw_pitch_roll, omega_body_from_pqr,
                               quat_to_matrix)
-from .config_blocks import read_disc_env, read_markers, read_physics  # noqa: F401 (moved; imported back)
+from .config_blocks import read_disc_env, read_markers, read_nature, read_physics  # noqa: F401 (moved; imported back)
 from .config_io import ConfigError, Section, load_yaml
 from .registry import split_extensions
 from .markers import FlightObservation, table_from_flights, write_marker_csv
@@ -169,26 +173,38 @@ class SynthSpec:
     env: Environment = Environment()
     markers: dict = field(default_factory=lambda: dict(DEFAULT_MARKERS))
     physics: dict = field(default_factory=dict)  # term id -> {parameter: value}
+    nature: dict = field(default_factory=dict)   # form of nature id (physics.nature) -> {parameter: value}
     sample_rate_hz: float = 120.0
     seed: int = 0
     imu: ImuSynth | None = None
 
     @property
     def terms(self):
-        """Physics terms of the data (the ``physics`` entries that are not data explanations)."""
-        return split_extensions(self.physics)[0]
+        """Physics terms of the data: the ``physics`` entries that are not data explanations, then the
+        forms of ``nature``."""
+        return split_extensions(self.physics)[0] + get_nature(self.nature)
 
     def extension(self) -> np.ndarray:
+        """The terms' parameter values, in :attr:`terms` order (a parameter not given: its off value)."""
         vals = []
         for term in self.terms:
-            given = self.physics[term.id]
+            given = self.physics[term.id] if term.id in self.physics else self.nature[term.id]
             for p in term.parameters:
                 vals.append(float(given.get(p.name, p.off_value)))
         return np.array(vals, float)
 
-    def wind(self) -> np.ndarray | None:
-        w = self.physics.get("wind")
-        return None if w is None else np.array([w.get(k, 0.0) for k in ("wind_x", "wind_y", "wind_z")])
+    def wind_at(self, position) -> np.ndarray | None:
+        """Σ of the terms' wind velocities [m/s] (3,) at ``position`` (3,) [m] and t = 0; None without
+        wind."""
+        terms = [t for t in self.terms if t.air is not None]
+        if not terms:
+            return None
+        ext, w, off = self.extension()[:, None], np.zeros(3), 0
+        for t in self.terms:
+            if t.air is not None:
+                w += np.array(t.air(ext, off, 0, 0.0, *map(float, position)))
+            off += len(t.parameters)
+        return w
 
 
 def _simulate_flight(spec: SynthSpec, f: LaunchSpec, y0: np.ndarray, times: np.ndarray, mb: np.ndarray, terms,
@@ -470,7 +486,7 @@ def synthesize(spec: SynthSpec) -> SynthResult:
     write_sigma = any(f.defects.per_point_sigma for f in spec.flights)
     for index, f in enumerate(spec.flights):
         times = np.arange(int(round(f.duration * spec.sample_rate_hz)) + 1) / spec.sample_rate_hz
-        y0 = f.initial_state(spec.wind())
+        y0 = f.initial_state(spec.wind_at(f.position))
         states0[f.name] = y0
         tr = _simulate_flight(spec, f, y0, times, mb, terms, ext)
         states = tr.states[0]
@@ -526,6 +542,7 @@ def synthesize(spec: SynthSpec) -> SynthResult:
     truth = {
         "name": spec.name, "seed": spec.seed, "sample_rate_hz": spec.sample_rate_hz,
         "coefficients": spec.coefficients.as_dict(), "physics": spec.physics,
+        **({"nature": spec.nature} if spec.nature else {}),
         "disc": spec.disc.__dict__, "environment": spec.env.__dict__, "markers": spec.markers,
         "flights": truth_flights,
     }
@@ -719,6 +736,7 @@ def synth_spec_from_mapping(data: dict, path) -> tuple[SynthSpec, Path, Path]:
     disc, env = read_disc_env(path, sec)
     markers = read_markers(path, sec, DEFAULT_MARKERS)
     physics = read_physics(path, sec, marker_ids=tuple(markers))
+    nature = read_nature(path, sec)
     out = sec.section("output")
     markers_path = path.parent / out.string("markers", f"{name}_markers.csv")
     truth_path = path.parent / out.string("truth", f"{name}_truth.json")
@@ -765,5 +783,5 @@ def synth_spec_from_mapping(data: dict, path) -> tuple[SynthSpec, Path, Path]:
                                   "(give this flight `imu: false`)")
     sec.finish()
     spec = SynthSpec(name=name, flights=tuple(flights), coefficients=coef, disc=disc, env=env, markers=markers,
-                     physics=physics, sample_rate_hz=rate, seed=seed, imu=imu)
+                     physics=physics, nature=nature, sample_rate_hz=rate, seed=seed, imu=imu)
     return spec, markers_path, truth_path

@@ -24,6 +24,8 @@ from typing import Callable
 
 import numba as nb
 
+from .windtunnel import wind_tunnel_shape
+
 CTX_T, CTX_X, CTX_Y, CTX_Z, CTX_SPEED, CTX_ALPHA, CTX_Q = 0, 1, 2, 3, 4, 5, 6
 CTX_VAX, CTX_VAY, CTX_VAZ = 7, 8, 9
 CTX_D1X, CTX_D1Y, CTX_D1Z = 10, 11, 12
@@ -42,11 +44,23 @@ class TermParameter:
     description: str
     off_value: float = 0.0
     prior_sd: float = 1.0
+    prior_mean: float | None = None
+
+    @property
+    def prior_centre(self) -> float:
+        """Centre of the parameter's normal prior: ``prior_mean`` if given, else the value that switches the
+        term off (a family's shape parameter: the library's original form)."""
+        return self.off_value if self.prior_mean is None else self.prior_mean
 
 
 @dataclass(frozen=True)
 class Term:
-    """A physics term: SPEC id, a one-line title, its equations and its compiled hooks."""
+    """A physics term: SPEC id, a one-line title, its equations and its compiled hooks.
+
+    A term is a *family* when some of its parameters change the shape of the effect rather than its size
+    (a decay height, a shear, an exponent, higher powers of α): at their off values the family is the
+    original formula, and the missing-physics search fits them with the rest, so an effect whose form in
+    nature differs from the formula is still described by its family."""
 
     id: str
     title: str
@@ -61,43 +75,25 @@ class Term:
         return tuple(p.name for p in self.parameters)
 
 
-# --- side force (Robins–Magnus) ----------------------------------------------------------------------
-
-@nb.njit(inline="always", cache=True)
-def _side_force_loads(E, off, b, ctx):
-    """F_Y = CY · (r d / 2|v_a|) · Q A · d2  =  CY · r · d/2 · (ρ A |v_a| / 2) · d2."""
-    cy = E[off, b]
-    mag = cy * ctx[CTX_R] * 0.5 * ctx[CTX_DIAM] * 0.5 * ctx[CTX_RHO] * ctx[CTX_AREA] * ctx[CTX_SPEED]
-    return (mag * ctx[CTX_D2X], mag * ctx[CTX_D2Y], mag * ctx[CTX_D2Z], 0.0, 0.0, 0.0)
-
-
-SIDE_FORCE = Term(
-    id="side_force",
-    title="Robins–Magnus side force perpendicular to the velocity in the disc plane, growing with spin",
-    equations="F_Y = C_Y · (r d / 2|v_a|) · Q A · d2   (d2 = d3 × d1: to the right in forward flight; "
-    "r > 0 pushes right)",
-    parameters=(TermParameter("CY", "1", "side-force coefficient per unit advance ratio r d / 2|v_a|",
-                              prior_sd=0.5),),
-    loads=_side_force_loads,
-)
-
-
 # --- steady wind ---------------------------------------------------------------------------------------
 
 @nb.njit(inline="always", cache=True)
 def _wind_air(E, off, b, t, x, y, z):
-    """w = (wx, wy, wz), constant in time and space."""
-    return (E[off, b], E[off + 1, b], E[off + 2, b])
+    """w = (w_x + s_x z, w_y + s_y z, w_z): steady, horizontal components varying linearly with height."""
+    return (E[off, b] + E[off + 3, b] * z, E[off + 1, b] + E[off + 4, b] * z, E[off + 2, b])
 
 
 WIND = Term(
     id="wind",
-    title="Steady wind: the aerodynamics see the air-relative velocity v_a = v − w",
-    equations="v_a = v − w,  w = (w_x, w_y, w_z) constant",
+    title="Steady wind, with a linear shear in height: the aerodynamics see v_a = v − w",
+    equations="v_a = v − w,  w = (w_x + s_x z, w_y + s_y z, w_z)  (z: height above the ground plane; "
+    "s_x = s_y = 0: uniform wind)",
     parameters=(
-        TermParameter("wind_x", "m/s", "wind velocity, world x (downrange)", prior_sd=3.0),
-        TermParameter("wind_y", "m/s", "wind velocity, world y (left)", prior_sd=3.0),
+        TermParameter("wind_x", "m/s", "wind velocity at z = 0, world x (downrange)", prior_sd=3.0),
+        TermParameter("wind_y", "m/s", "wind velocity at z = 0, world y (left)", prior_sd=3.0),
         TermParameter("wind_z", "m/s", "wind velocity, world z (up)", prior_sd=1.0),
+        TermParameter("shear_x", "1/s", "height gradient of wind_x", prior_sd=1.0),
+        TermParameter("shear_y", "1/s", "height gradient of wind_y", prior_sd=1.0),
     ),
     air=_wind_air,
 )
@@ -136,47 +132,102 @@ def _lift_drag_force(ctx, lift, drag):
     return lift * lx - drag * ax, lift * ly - drag * ay, lift * lz - drag * az
 
 
+# --- side force (Robins–Magnus) ----------------------------------------------------------------------
+
+@nb.njit(inline="always", cache=True)
+def _signed_power(x, n):
+    """sgn(x) |x|^n (zero at x = 0): a growth law with exponent n that keeps the sign of x."""
+    if x == 0.0:
+        return 0.0
+    return math.copysign(abs(x) ** n, x)
+
+
+@nb.njit(inline="always", cache=True)
+def _side_force_loads(E, off, b, ctx):
+    """F_Y = C_Y · sgn(μ)|μ|^n_Y · Q A · d2,  μ = r d / 2|v_a|."""
+    mag = E[off, b] * _signed_power(_advance_ratio(ctx), E[off + 1, b]) * ctx[CTX_Q] * ctx[CTX_AREA]
+    return (mag * ctx[CTX_D2X], mag * ctx[CTX_D2Y], mag * ctx[CTX_D2Z], 0.0, 0.0, 0.0)
+
+
+#: prior scale of a growth exponent n (off value 1: linear in the advance ratio)
+EXPONENT_SD = 0.5
+
+
+SIDE_FORCE = Term(
+    id="side_force",
+    title="Robins–Magnus side force perpendicular to the velocity in the disc plane, growing with spin",
+    equations="F_Y = C_Y · sgn(μ)|μ|^n_Y · Q A · d2,  μ = r d / 2|v_a|  (d2 = d3 × d1: to the right in forward "
+    "flight; r > 0 pushes right; n_Y = 1: linear in the advance ratio)",
+    parameters=(TermParameter("CY", "1", "side-force coefficient per unit advance ratio r d / 2|v_a|",
+                              prior_sd=0.5),
+                TermParameter("n_Y", "1", "growth exponent in the advance ratio", off_value=1.0,
+                              prior_sd=EXPONENT_SD)),
+    loads=_side_force_loads,
+)
+
+
 # --- ground effect -------------------------------------------------------------------------------------
 
 @nb.njit(inline="always", cache=True)
 def _ground_effect_loads(E, off, b, ctx):
-    """ΔL = ΔC_L,ge · e^(−z/d) · Q A along d2 × v̂_a;  ΔD = ΔC_D,ge · e^(−z/d) · Q A along −v̂_a."""
-    g = math.exp(-ctx[CTX_Z] / ctx[CTX_DIAM]) * ctx[CTX_Q] * ctx[CTX_AREA]
+    """ΔL = ΔC_L,ge · e^(−z/h) · Q A along d2 × v̂_a;  ΔD = ΔC_D,ge · e^(−z/h) · Q A along −v̂_a;  h = d e^(ln_h)."""
+    h = ctx[CTX_DIAM] * math.exp(E[off + 2, b])
+    g = math.exp(-ctx[CTX_Z] / h) * ctx[CTX_Q] * ctx[CTX_AREA]
     fx, fy, fz = _lift_drag_force(ctx, E[off, b] * g, E[off + 1, b] * g)
     return (fx, fy, fz, 0.0, 0.0, 0.0)
 
 
 GROUND_EFFECT = Term(
     id="ground_effect",
-    title="Ground effect: lift and drag change close to the ground, fading over about one diameter",
-    equations="ΔL = ΔC_L,ge · exp(−z/d) · Q A  (along d2 × v̂_a),  ΔD = ΔC_D,ge · exp(−z/d) · Q A  (along −v̂_a); "
-    "z: height of the centre of mass above the ground plane z = 0, d: diameter",
+    title="Ground effect: lift and drag change close to the ground, fading over a decay height h",
+    equations="ΔL = ΔC_L,ge · exp(−z/h) · Q A  (along d2 × v̂_a),  ΔD = ΔC_D,ge · exp(−z/h) · Q A  (along −v̂_a),  "
+    "h = d · exp(ln_h_ge); z: height of the centre of mass above the ground plane z = 0, d: diameter "
+    "(ln_h_ge = 0: h = d)",
     parameters=(TermParameter("CL_ge", "1", "lift change at the ground (z = 0)", prior_sd=0.3),
-                TermParameter("CD_ge", "1", "drag change at the ground (z = 0)", prior_sd=0.2)),
+                TermParameter("CD_ge", "1", "drag change at the ground (z = 0)", prior_sd=0.2),
+                TermParameter("ln_h_ge", "1", "log of the decay height in diameters, ln(h/d)", prior_sd=0.7)),
     loads=_ground_effect_loads,
 )
 
 
 # --- non-linear angle-of-attack dependence -------------------------------------------------------------
 
+_TUNNEL = wind_tunnel_shape()
+
+
+def _shape_parameter(name: str, unit: str, description: str, sd: float) -> TermParameter:
+    """A polynomial α term centred on the wind-tunnel table's value, prior sd max(sd, 2 |mean|)."""
+    mean = float(getattr(_TUNNEL, name))
+    return TermParameter(name, unit, description, prior_sd=max(sd, 2.0 * abs(mean)), prior_mean=mean)
+
+
 @nb.njit(inline="always", cache=True)
 def _nonlinear_aero_loads(E, off, b, ctx):
-    """ΔC_L = C_L2 α², ΔC_D = C_D3 |α|³, ΔC_M = C_M2 α² (α in rad), forces × Q A, moment × Q A d about d2."""
+    """ΔC_L = C_L2 α² + C_L3 α³, ΔC_D = C_D3 |α|³ + C_D4 α⁴, ΔC_M = C_M2 α² + C_M3 α³ (α in rad); forces × Q A,
+    moment × Q A d about d2."""
     a = ctx[CTX_ALPHA]
+    a2 = a * a
     qa = ctx[CTX_Q] * ctx[CTX_AREA]
-    fx, fy, fz = _lift_drag_force(ctx, E[off, b] * a * a * qa, E[off + 1, b] * abs(a) * a * a * qa)
-    pitch = E[off + 2, b] * a * a * qa * ctx[CTX_DIAM]
+    dcl = (E[off, b] + E[off + 3, b] * a) * a2
+    dcd = (E[off + 1, b] * abs(a) + E[off + 4, b] * a2) * a2
+    fx, fy, fz = _lift_drag_force(ctx, dcl * qa, dcd * qa)
+    pitch = (E[off + 2, b] + E[off + 5, b] * a) * a2 * qa * ctx[CTX_DIAM]
     return (fx, fy, fz, pitch * ctx[CTX_D2X], pitch * ctx[CTX_D2Y], pitch * ctx[CTX_D2Z])
 
 
 NONLINEAR_AERO = Term(
     id="nonlinear_aero",
     title="Angle-of-attack dependence beyond linear lift, quadratic drag and linear pitching moment",
-    equations="C_L = C_L0 + C_Lα α + C_L2 α²,  C_D = C_D0 + C_Dα α² + C_D3 |α|³,  C_M = C_M0 + C_Mα α + C_Mq q + C_M2 α² "
-    "(the wind-tunnel table bends this way: lift saturates, drag and pitching moment grow faster at high α)",
-    parameters=(TermParameter("CL2", "1/rad²", "quadratic lift term", prior_sd=2.0),
-                TermParameter("CD3", "1/rad³", "cubic drag term", prior_sd=2.0),
-                TermParameter("CM2", "1/rad²", "quadratic pitching-moment term", prior_sd=0.5)),
+    equations="C_L = C_L0 + C_Lα α + C_L2 α² + C_L3 α³,  C_D = C_D0 + C_Dα α² + C_D3 |α|³ + C_D4 α⁴,  "
+    "C_M = C_M0 + C_Mα α + C_Mq q + C_M2 α² + C_M3 α³  (α in rad; the wind-tunnel table bends this way: lift "
+    "saturates, drag and pitching moment grow faster at high α). Prior means: the table's shape over −10°…30° "
+    "(physics.windtunnel.wind_tunnel_shape), prior sd at least twice their size",
+    parameters=(_shape_parameter("CL2", "1/rad²", "quadratic lift term", 2.0),
+                _shape_parameter("CD3", "1/rad³", "cubic drag term", 2.0),
+                _shape_parameter("CM2", "1/rad²", "quadratic pitching-moment term", 0.5),
+                _shape_parameter("CL3", "1/rad³", "cubic lift term", 4.0),
+                _shape_parameter("CD4", "1/rad⁴", "quartic drag term", 4.0),
+                _shape_parameter("CM3", "1/rad³", "cubic pitching-moment term", 1.0)),
     loads=_nonlinear_aero_loads,
 )
 
@@ -185,16 +236,19 @@ NONLINEAR_AERO = Term(
 
 @nb.njit(inline="always", cache=True)
 def _spin_lift_loads(E, off, b, ctx):
-    """ΔL = C_Lr · μ · Q A along d2 × v̂_a,  μ = r d / 2|v_a|."""
-    fx, fy, fz = _lift_drag_force(ctx, E[off, b] * _advance_ratio(ctx) * ctx[CTX_Q] * ctx[CTX_AREA], 0.0)
+    """ΔL = C_Lr · sgn(μ)|μ|^n_Lr · Q A along d2 × v̂_a,  μ = r d / 2|v_a|."""
+    mu = _signed_power(_advance_ratio(ctx), E[off + 1, b])
+    fx, fy, fz = _lift_drag_force(ctx, E[off, b] * mu * ctx[CTX_Q] * ctx[CTX_AREA], 0.0)
     return (fx, fy, fz, 0.0, 0.0, 0.0)
 
 
 SPIN_LIFT = Term(
     id="spin_lift",
-    title="Lift that grows with the spin's advance ratio r d / 2|v_a|",
-    equations="ΔL = C_Lr · (r d / 2|v_a|) · Q A  (along d2 × v̂_a)",
-    parameters=(TermParameter("CLr", "1", "lift per unit advance ratio", prior_sd=0.5),),
+    title="Lift that grows with the spin's advance ratio μ = r d / 2|v_a|",
+    equations="ΔL = C_Lr · sgn(μ)|μ|^n_Lr · Q A  (along d2 × v̂_a; n_Lr = 1: linear)",
+    parameters=(TermParameter("CLr", "1", "lift per unit advance ratio", prior_sd=0.5),
+                TermParameter("n_Lr", "1", "growth exponent in the advance ratio", off_value=1.0,
+                              prior_sd=EXPONENT_SD)),
     loads=_spin_lift_loads,
 )
 
@@ -203,16 +257,18 @@ SPIN_LIFT = Term(
 
 @nb.njit(inline="always", cache=True)
 def _roll_spin_loads(E, off, b, ctx):
-    """ΔR = C_Rμ · μ · Q A d about d1,  μ = r d / 2|v_a|."""
-    roll = E[off, b] * _advance_ratio(ctx) * ctx[CTX_Q] * ctx[CTX_AREA] * ctx[CTX_DIAM]
+    """ΔR = C_Rμ · sgn(μ)|μ|^n_Rμ · Q A d about d1,  μ = r d / 2|v_a|."""
+    roll = E[off, b] * _signed_power(_advance_ratio(ctx), E[off + 1, b]) * ctx[CTX_Q] * ctx[CTX_AREA] * ctx[CTX_DIAM]
     return (0.0, 0.0, 0.0, roll * ctx[CTX_D1X], roll * ctx[CTX_D1Y], roll * ctx[CTX_D1Z])
 
 
 ROLL_SPIN_COUPLING = Term(
     id="roll_spin_coupling",
-    title="Roll moment depending on the advance ratio r d / 2|v_a|",
-    equations="ΔR = C_Rμ · (r d / 2|v_a|) · Q A d  (about d1)",
-    parameters=(TermParameter("CRmu", "1", "roll moment per unit advance ratio", prior_sd=0.05),),
+    title="Roll moment depending on the advance ratio μ = r d / 2|v_a|",
+    equations="ΔR = C_Rμ · sgn(μ)|μ|^n_Rμ · Q A d  (about d1; n_Rμ = 1: linear)",
+    parameters=(TermParameter("CRmu", "1", "roll moment per unit advance ratio", prior_sd=0.05),
+                TermParameter("n_Rmu", "1", "growth exponent in the advance ratio", off_value=1.0,
+                              prior_sd=EXPONENT_SD)),
     loads=_roll_spin_loads,
 )
 

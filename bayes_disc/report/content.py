@@ -7,6 +7,9 @@ import numpy as np
 
 from ..inference.layout import IC_NAMES as IC_ORDER
 from ..inference.versions import software_versions
+from ..physics import TERMS, Disc
+from ..physics.discrepancy import coefficient_curve
+from ..physics.nature import NATURE
 from . import figures as F
 from .answer import LIT_LABELS, compare
 from .sections import Raw, Section, esc, fmt, fmt_count, fmt_estimate, fmt_percent, ordinal, table
@@ -341,7 +344,7 @@ def flight_section(ctx) -> Section | None:
 
 
 def force_curve_section(ctx) -> Section:
-    from .windtunnel import load_wind_tunnel
+    from ..physics.windtunnel import load_wind_tunnel
     tunnel = load_wind_tunnel()
     kin = ctx.kinematics
     a_all = np.concatenate([k["alpha_ref"] for k in kin])
@@ -516,8 +519,54 @@ def missing_physics_section(ctx) -> Section | None:
             ["round", "candidate", "extra parameters", "ΔBIC", "share of excess misfit", "status"],
             [[c.get("round"), c.get("id"), c.get("extra_parameters"), _fixed(c.get("evidence")),
               fmt_percent(c.get("share_explained")), c.get("status")] for c in cands]))
-    fig = _diagnosis_figure(ctx, data)
-    return Section("missing-physics", "Missing physics", guide, "".join(parts), [fig] if fig else [])
+    figs = [_diagnosis_figure(ctx, data)]
+    learned = data.get("learned_discrepancy")
+    if learned and learned.get("selected"):
+        parts.append(_learned_table(learned))
+        figs.append(_learned_figure(ctx, learned))
+    return Section("missing-physics", "Missing physics", guide, "".join(parts), [f for f in figs if f])
+
+
+def _learned_table(ld: dict) -> str:
+    conc = ", ".join(f"{v} {100 * s:.0f} %" for v, s in sorted(ld["concentration"].items(), key=lambda t: -t[1]))
+    rows = [[n, f"{c['value']:.4g} ± {c['sd']:.2g}"] for n, c in ld["columns"].items()]
+    return ("<h3>Learned correction</h3>"
+            f"<p>{ld['selected']} functions selected (ΔBIC {_fixed(ld.get('evidence'), ',.0f')}; residuals after: "
+            f"{'white' if ld.get('white') else 'structured'}); evidence by flight variable: {esc(conc)}; named "
+            f"family: {esc(ld.get('family') or 'none')}.</p>" + table(["column (dc_direction_function)", "value ± sd"], rows))
+
+
+def generating_curve(truth: dict | None, curve: dict) -> tuple[np.ndarray, str] | None:
+    """For synthetic data: the change of the curve's coefficient that the concealed terms and forms of nature
+    of ``truth.json`` make along the curve's variable (summed), and their names; None without a truth file
+    or when they change nothing there."""
+    if not truth:
+        return None
+    disc = Disc(**truth["disc"]) if truth.get("disc") else Disc()
+    total, names = np.zeros(len(curve["grid"])), []
+    for block, registry in (("physics", TERMS), ("nature", NATURE)):
+        for tid, params in (truth.get(block) or {}).items():
+            term = registry.get(tid)
+            if term is None or term.loads is None:
+                continue
+            vals = [params.get(q.name, q.off_value) for q in term.parameters]
+            c = coefficient_curve(term, vals, curve["direction"], curve["variable"], curve["grid"], curve["state"], disc)
+            if np.any(c != 0):
+                total, names = total + c, names + [tid]
+    return (total, "generating: " + " + ".join(n.replace("_", " ") for n in names)) if names else None
+
+
+def _learned_figure(ctx, ld: dict):
+    curve = ld.get("curve")
+    if not curve:
+        return None
+    gen = generating_curve(ctx.run.truth, curve)
+    fig = F.learned_curve_figure(curve, *(gen or (None, "")))
+    return _figure(ctx, fig, "learned_curve",
+                   f"The learned correction of the {curve['direction']} coefficient against {curve['variable']} "
+                   "(blue, ±2 sd; the other flight variables at their median flown values)"
+                   + (f", the fitted {curve['family']['id'].replace('_', ' ')} family (dashed)" if curve.get("family") else "")
+                   + (", and the curve that generated these synthetic data (black)" if gen else "") + ".")
 
 
 #: most flagged points and frames listed per table (all are in flagged.json)

@@ -438,3 +438,35 @@ def diagnosis_figure(series: dict, flights: list[str], names: list[str], labels:
     fig.legend(loc="upper center", ncol=3, fontsize=8, frameon=False, markerscale=4)
     fig.subplots_adjust(left=0.08, right=0.98, top=1 - 0.7 / height, bottom=0.5 / height, hspace=0.25, wspace=0.1)
     return fig
+
+
+#: axis labels and display scales of the learned curve's flight variables
+CURVE_AXES = {"height": ("height z [m]", 1.0), "alpha": ("angle of attack α [deg]", 180.0 / np.pi),
+              "spin": ("advance ratio μ = r d / 2|v_a|", 1.0)}
+
+
+def learned_curve_figure(curve: dict, generating: np.ndarray | None = None, generating_label: str = "") -> Figure:
+    """The learned correction ΔC against one flight variable (line and ±2 sd band), beside the library
+    family fitted as a candidate (dashed) and, for synthetic data, the curve that generated the data (black).
+    ``curve``: ``learned_discrepancy.curve`` of ``diagnosis.json``; the flown range (5th–95th percentile) is
+    shaded."""
+    label, scale = CURVE_AXES[curve["variable"]]
+    x = np.asarray(curve["grid"], float) * scale
+    value, sd = np.asarray(curve["value"], float), np.asarray(curve["sd"], float)
+    fig = new_figure(6.0, 3.6)
+    ax = fig.add_subplot(1, 1, 1)
+    ax.fill_between(x, value - 2 * sd, value + 2 * sd, color="tab:blue", alpha=0.2, lw=0, label="learned ± 2 sd")
+    ax.plot(x, value, color="tab:blue", lw=2, label="learned correction")
+    fam = curve.get("family")
+    if fam:
+        ax.plot(x, np.asarray(fam["value"], float), "--", color="tab:orange", lw=1.5,
+                label=f"fitted {fam['id'].replace('_', ' ')} family")
+    if generating is not None:
+        ax.plot(x, generating, color="k", lw=1.2, label=generating_label or "generating form")
+    ax.axhline(0, color="0.5", lw=0.5)
+    ax.set_xlabel(label, fontsize=9)
+    ax.set_ylabel(f"Δ{curve['direction']} coefficient", fontsize=9)
+    ax.tick_params(labelsize=8)
+    ax.legend(fontsize=8, frameon=False)
+    fig.subplots_adjust(left=0.13, right=0.97, top=0.95, bottom=0.14)
+    return fig

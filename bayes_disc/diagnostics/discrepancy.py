@@ -1,0 +1,229 @@
+"""Learning what the model misses when no term of the library explains it.
+
+The base model is extended by the learned discrepancy of :mod:`bayes_disc.physics.discrepancy` (36
+columns: five directions × functions of height, α and spin), and a sparse set of columns is selected by
+sequentially thresholded least squares on the model linearised at the base optimum (Brunton et al.'s
+SINDy selection, with z-scores in place of a fixed threshold):
+
+1. solve the linearised joint least squares for the base parameters and the active columns; each column's
+   z-score is its estimate over its Gauss–Newton sd;
+2. drop the columns with |z| < ``Z_KEEP`` — at most half of the active set per round, the weakest first
+   (columns are correlated: dropping all weak ones at once can drop the one that mattered);
+3. repeat until every active column has |z| ≥ ``Z_KEEP`` (at most ``MAX_ROUNDS`` rounds).
+
+The selected columns are then fitted with the full non-linear model (the others held at zero), and the
+learned correction is judged like a candidate: ΔBIC over the base with k = the number of selected
+columns, whiteness of every flight's residuals after. Where it is concentrated — the share of its Wald
+statistic (c_gᵀ Σ_gg⁻¹ c_g over the columns of a flight variable g: height, α, spin, constant) — names the
+flight variable and so the family of the library the effect belongs to (height → ground effect, α →
+non-linear aerodynamics, spin → side force, spin lift or roll coupling by direction) when one variable
+holds at least ``CONCENTRATION_NAMED`` of it. The correction's curve against that variable, with its
+band, is what the model was missing, in the user's terms.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..inference.leastsq import covariance_from_jacobian, refine_least_squares, whitened_jacobian, whitened_residuals
+from ..physics.discrepancy import COLUMNS, DISCREPANCY, DIRECTIONS, FUNCTIONS, basis, column_name
+from .missing_physics import ModelFit, extend_theta, model_fit, structured
+from .residuals import channel_runs
+
+#: least |z| of a kept column
+Z_KEEP = 3.0
+#: most selection rounds
+MAX_ROUNDS = 12
+#: least share of the Wald statistic in one flight variable for it to be named
+CONCENTRATION_NAMED = 0.6
+#: the family of the library a (variable, main direction) belongs to
+FAMILY_VARIABLE = {("height", None): "ground_effect", ("alpha", None): "nonlinear_aero",
+                   ("spin", "side"): "side_force", ("spin", "lift"): "spin_lift", ("spin", "roll"): "roll_spin_coupling"}
+#: the flight variables, in the order of their functions
+VARIABLES = ("height", "alpha", "spin", "constant")
+
+
+def family_of(variable: str | None, direction: str | None) -> str | None:
+    """The library family a correction concentrated in ``variable`` (mainly in ``direction``) belongs to."""
+    if variable is None:
+        return None
+    return FAMILY_VARIABLE.get((variable, None), FAMILY_VARIABLE.get((variable, direction)))
+
+
+def select_columns(J: np.ndarray, r: np.ndarray, keep: np.ndarray, candidates: np.ndarray, z_keep: float = Z_KEEP,
+                   max_rounds: int = MAX_ROUNDS) -> tuple[np.ndarray, np.ndarray]:
+    """Sequentially thresholded least squares on a linearised problem (module docstring).
+
+    Parameters
+    ----------
+    J : (n, dim) array
+        Whitened Jacobian at the linearisation point.
+    r : (n,) array
+        Whitened residuals there.
+    keep : (dim,) bool array
+        Parameters always in the fit (the base model's).
+    candidates : (m,) int array
+        Columns of J that may be selected.
+    z_keep : float
+    max_rounds : int
+
+    Returns
+    -------
+    selected : (m',) int array
+        The selected columns (subset of ``candidates``).
+    z : (m',) array
+        Their final z-scores.
+    """
+    active = np.array(candidates, int)
+    z = np.zeros(0)
+    for _ in range(max_rounds):
+        if active.size == 0:
+            break
+        cols = np.r_[np.flatnonzero(keep), active]
+        A = J[:, cols]
+        cov = covariance_from_jacobian(A)
+        delta = -cov @ (A.T @ r)
+        z = delta[-active.size:] / np.sqrt(np.maximum(np.diag(cov)[-active.size:], 1e-300))
+        weak = np.flatnonzero(np.abs(z) < z_keep)
+        if weak.size == 0:
+            break
+        weak = weak[np.argsort(np.abs(z[weak]))][: max(1, active.size // 2)]
+        mask = np.ones(active.size, bool)
+        mask[weak] = False
+        active, z = active[mask], z[mask]
+    return active, z
+
+
+@dataclass
+class LearnedDiscrepancy:
+    """The learned correction: its selected columns (names, values, sd, covariance), the fit, ΔBIC over the
+    base, whiteness after, the share of its Wald statistic per flight variable and per direction, and the
+    flown range of every variable (height [m], α [rad], μ)."""
+
+    fit: ModelFit
+    names: list
+    values: np.ndarray
+    sd: np.ndarray
+    cov: np.ndarray
+    delta_bic: float
+    white: bool
+    concentration: dict
+    direction_share: dict
+    flown: dict = field(default_factory=dict)
+
+    @property
+    def variable(self) -> str | None:
+        """The flight variable that holds at least ``CONCENTRATION_NAMED`` of the correction (not the
+        constant), or None."""
+        v, share = max(self.concentration.items(), key=lambda t: t[1]) if self.concentration else (None, 0.0)
+        return v if v not in (None, "constant") and share >= CONCENTRATION_NAMED else None
+
+    @property
+    def direction(self) -> str | None:
+        """The direction that holds most of the correction."""
+        return max(self.direction_share.items(), key=lambda t: t[1])[0] if self.direction_share else None
+
+    @property
+    def family(self) -> str | None:
+        """The library family of :attr:`variable` and :attr:`direction` (:data:`FAMILY_VARIABLE`), or None."""
+        return family_of(self.variable, self.direction)
+
+    def curve(self, direction: str, variable: str, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """ΔC in ``direction`` against ``variable`` on ``grid`` (height [m], α [rad] or μ), the other
+        variables at the median flown values; returns (value, sd) each shaped like ``grid``."""
+        state = {v: np.full(np.shape(grid), self.flown[v][1]) for v in ("height", "alpha", "spin")}
+        state[variable] = np.asarray(grid, float)
+        phi = basis(state["height"], state["alpha"], state["spin"])
+        g = np.zeros((len(self.names),) + np.shape(grid))
+        for i, n in enumerate(self.names):
+            for j, f in enumerate(FUNCTIONS):
+                if n == column_name(direction, f):
+                    g[i] = phi[j]
+        value = np.tensordot(self.values, g, axes=1)
+        var = np.einsum("i...,ij,j...->...", g, self.cov, g)
+        return value, np.sqrt(np.maximum(var, 0.0))
+
+
+def flown_range(fit: ModelFit) -> dict:
+    """{variable: (5th percentile, median, 95th percentile)} over every flight's fitted trajectory: height z
+    [m], α [rad], advance ratio μ = r d / 2|v_a|."""
+    p, vals = fit.problem, {"height": [], "alpha": [], "spin": []}
+    for k in range(p.n_flights):
+        _, tr, _, _, air = channel_runs(p, fit.ls.theta, k)[0]
+        vals["height"].append(tr.states[0][:, 2])
+        vals["alpha"].append(air.alpha[0])
+        vals["spin"].append(air.pqr[0, :, 2] * p.disc.diameter / (2 * np.maximum(air.speed[0], 1e-9)))
+    return {v: tuple(float(q) for q in np.nanpercentile(np.concatenate(x), [5, 50, 95])) for v, x in vals.items()}
+
+
+def _wald_shares(names: list, values: np.ndarray, cov: np.ndarray, key) -> dict:
+    """{group: share of Σ Wald statistics} with columns grouped by ``key(direction, function)``."""
+    groups = {}
+    for i, n in enumerate(names):
+        d, f = COLUMN_OF[n]
+        groups.setdefault(key(d, f), []).append(i)
+    stats = {}
+    for g, idx in groups.items():
+        c, S = values[idx], cov[np.ix_(idx, idx)]
+        stats[g] = float(c @ np.linalg.pinv(S) @ c)
+    total = sum(stats.values())
+    return {g: s / total for g, s in stats.items()} if total > 0 else {}
+
+
+#: parameter name → (direction, function)
+COLUMN_OF = {column_name(d, f): (d, f) for d, f in COLUMNS}
+
+
+def learn_discrepancy(base: ModelFit, build, max_nfev: int = 200, log=lambda msg: None) -> LearnedDiscrepancy | None:
+    """Learn a sparse correction to the base model (module docstring).
+
+    Parameters
+    ----------
+    base : ModelFit
+        The base model's fit.
+    build : callable
+        ``build(ids)`` → the :class:`~bayes_disc.inference.model.Problem` of a model.
+    max_nfev : int
+        Evaluations of the non-linear refit.
+    log : callable
+        Progress messages.
+
+    Returns
+    -------
+    LearnedDiscrepancy or None
+        None when no column is selected.
+    """
+    p = build(base.ids + (DISCREPANCY.id,))
+    x0 = extend_theta(base.ls.theta, base.problem, p)
+    sigma = base.ls.sigma
+    J = whitened_jacobian(x0, p, sigma)
+    r = whitened_residuals(x0, p, sigma)
+    idx = np.array([p.layout.index(column_name(d, f)) for d, f in COLUMNS])
+    keep = np.ones(p.dim, bool)
+    keep[idx] = False
+    selected, z = select_columns(J, r, keep, idx)
+    if selected.size == 0:
+        log("  learned discrepancy: no column of the correction is significant")
+        return None
+    names = [p.names[j] for j in selected]
+    log(f"  learned discrepancy: {len(names)} columns selected ({', '.join(names)}); refitting")
+    free = keep.copy()
+    free[selected] = True
+    ls = refine_least_squares(p, x0, max_nfev=max_nfev, free=free)
+    fit = model_fit(p, ls, base.ids + (DISCREPANCY.id,))
+    n = base.problem.n_coords.astype(float)
+    delta_bic = float(np.sum(n * np.log(base.ss / fit.ss)) - selected.size * np.log(n.sum()))
+    values, cov = ls.theta[selected], ls.cov[np.ix_(selected, selected)]
+    learned = LearnedDiscrepancy(
+        fit=fit, names=names, values=values, sd=np.sqrt(np.diag(cov)), cov=cov, delta_bic=delta_bic,
+        white=not any(structured(fit).values()),
+        concentration=_wald_shares(names, values, cov, lambda d, f: FUNCTIONS[f][0]),
+        direction_share=_wald_shares(names, values, cov, lambda d, f: d),
+        flown=flown_range(base))
+    log(f"  learned discrepancy: ΔBIC {delta_bic:.1f}, residuals {'white' if learned.white else 'structured'}, "
+        + ", ".join(f"{v} {s:.2f}" for v, s in sorted(learned.concentration.items(), key=lambda t: -t[1])))
+    return learned
+
+
+__all__ = ["LearnedDiscrepancy", "learn_discrepancy", "select_columns", "flown_range", "family_of", "DIRECTIONS"]
