@@ -64,7 +64,7 @@ def check_campaign(cal: CalConfig) -> None:
     key = json.loads(json.dumps(cal.key()))
     if path.is_file():
         old = json.loads(path.read_text())
-        if old != key:
+        if old != key and old not in [json.loads(json.dumps(k)) for k in cal.earlier_keys()]:
             diff = sorted(k for k in set(old) | set(key) if old.get(k) != key.get(k))
             raise ConfigError(cal.path, "output", f"{out} holds replicates of another campaign (differs in "
                               f"{', '.join(diff)}); use another output folder or remove this one")

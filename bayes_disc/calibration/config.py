@@ -110,6 +110,20 @@ class CalConfig:
         return {"seed": self.seed, "template": repr(self.template), "truth": repr(self.truth),
                 "launch_jitter": self.launch_jitter, "run": self.run, "draws": self.draws}
 
+    def earlier_keys(self) -> list[dict]:
+        """The key as campaigns recorded it before the template gained the fields of
+        :data:`LATER_TEMPLATE_FIELDS`, when they hold the value that leaves a replicate unchanged (such a
+        campaign resumes: its replicates are the same)."""
+        text = repr(self.template)
+        for name, neutral in LATER_TEMPLATE_FIELDS.items():
+            if getattr(self.template, name) == neutral:
+                text = text.replace(f", {name}={neutral!r}", "")
+        return [] if text == repr(self.template) else [{**self.key(), "template": text}]
+
+
+#: synth-template fields added after campaigns were first recorded, with their neutral value
+LATER_TEMPLATE_FIELDS = {"nature": {}}
+
 
 def _template(path: Path, sec: Section) -> SynthSpec:
     raw = sec.raw("template", required=True)
