@@ -264,3 +264,21 @@ def test_every_cal_key_is_documented_with_its_default(tmp_path):
     checked = {k: (rows[k], keys[k]) for k in leaves(keys)
                if not k.endswith("<coefficient>") and not default_matches(rows[k], keys[k])}
     assert not checked, f"documented default differs from the code (doc cell, code default): {checked}"
+
+
+def test_a_campaign_recorded_before_the_template_had_nature_still_resumes(tmp_path):
+    """runs/calibration/out_ar1 was recorded before SynthSpec gained ``nature``: its key (template repr without
+    the field) is accepted while the template has no nature, and refused once it has one."""
+    from dataclasses import replace
+
+    from bayes_disc.calibration.campaign import CAMPAIGN_FILE, check_campaign
+    cal = load_cal_config(Path(__file__).parents[1] / "runs/calibration/cal4_ar1.yaml")
+    cal = replace(cal, output=tmp_path)
+    old = {**cal.key(), "template": repr(cal.template).replace(", nature={}", "")}
+    assert old != cal.key() and cal.earlier_keys() == [old]
+    (tmp_path / CAMPAIGN_FILE).write_text(json.dumps(old))
+    check_campaign(cal)                                              # resumes
+    natured = replace(cal, template=replace(cal.template, nature={"wind_power_shear": {"wref_x": 1.0}}))
+    assert natured.earlier_keys() == []
+    with pytest.raises(ConfigError, match="another campaign"):
+        check_campaign(natured)
