@@ -31,8 +31,8 @@ def test_discrepancy_is_a_physics_term_but_not_a_candidate():
     assert unit(DISCREPANCY.id).kind == "learned correction"
 
 
-@pytest.mark.parametrize("direction,function", [("lift", "h03"), ("side", "mu1"), ("pitch", "a3"), ("roll", "c"),
-                                                ("drag", "h01")])
+@pytest.mark.parametrize("direction,function", [("lift", "h02"), ("side", "mu1"), ("pitch", "a3"), ("roll", "c"),
+                                                ("drag", "h005")])
 def test_each_column_acts_in_its_direction_with_its_function(direction, function):
     """The compiled hook, probed in a flight context, gives c · φ_f in the column's direction and nothing in the
     others."""
@@ -72,15 +72,16 @@ def test_select_columns_recovers_a_sparse_truth():
     y = J @ beta + rng.standard_normal(n)
     keep = np.zeros(24, bool)
     keep[:4] = True
-    selected, z = select_columns(J, -y, keep, np.arange(4, 24))
+    selected, z, step = select_columns(J, -y, keep, np.arange(4, 24))
     assert sorted(selected) == [11, 15, 22]
     assert np.all(np.abs(z) >= 3)
-    none, _ = select_columns(J, -rng.standard_normal(n), keep, np.arange(4, 24))
+    assert np.allclose(step[[11, 15, 22]], beta[[11, 15, 22]], atol=0.1) and np.all(step[[4, 10, 23]] == 0)
+    none, _, _ = select_columns(J, -rng.standard_normal(n), keep, np.arange(4, 24))
     assert none.size <= 1          # pure noise: at most a chance column at |z| ≥ 3 (p = 0.0027 each)
 
 
 def test_learned_curve_band_is_the_linear_propagation():
-    names = [column_name("lift", "h01"), column_name("lift", "h09"), column_name("drag", "h03")]
+    names = [column_name("lift", "h01"), column_name("lift", "h08"), column_name("drag", "h04")]
     cov = np.array([[0.01, 0.002, 0.0], [0.002, 0.004, 0.0], [0.0, 0.0, 0.001]])
     ld = LearnedDiscrepancy(fit=None, names=names, values=np.array([0.2, 0.1, 0.05]), sd=np.sqrt(np.diag(cov)),
                             cov=cov, delta_bic=50.0, white=True, concentration={"height": 1.0},
@@ -88,7 +89,7 @@ def test_learned_curve_band_is_the_linear_propagation():
                             flown={"height": (0.1, 0.5, 1.0), "alpha": (0.0, 0.1, 0.2), "spin": (0.3, 0.4, 0.5)})
     z = np.array([0.0, 0.3, 1.0])
     value, sd = ld.curve("lift", "height", z)
-    g = np.stack([np.exp(-z / 0.1), np.exp(-z / 0.9)])
+    g = np.stack([np.exp(-z / 0.1), np.exp(-z / 0.8)])
     assert np.allclose(value, 0.2 * g[0] + 0.1 * g[1])
     assert np.allclose(sd, np.sqrt(np.einsum("in,ij,jn->n", g, cov[:2, :2], g)))
     assert ld.variable == "height" and ld.direction == "lift" and ld.family == "ground_effect"
@@ -97,9 +98,10 @@ def test_learned_curve_band_is_the_linear_propagation():
 
 
 def test_basis_functions():
-    phi = basis(np.array([0.0, 0.3]), 0.2, 0.5)
-    assert phi.shape == (8, 2)
-    assert np.allclose(phi[:, 1], [np.exp(-3), np.exp(-1), np.exp(-1 / 3), 0.04, 0.008, 0.5, 0.125, 1.0])
+    phi = basis(np.array([0.0, 0.4]), 0.2, 0.5)
+    assert phi.shape == (10, 2)
+    assert np.allclose(phi[:, 1], [np.exp(-8), np.exp(-4), np.exp(-2), np.exp(-1), np.exp(-0.5), 0.04, 0.008, 0.5,
+                                   0.125, 1.0])
 
 
 def test_held_parameters_stay_put_and_have_no_covariance(tmp_path):

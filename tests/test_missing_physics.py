@@ -62,8 +62,10 @@ def make_run(folder: Path, physics: dict, seed: int, gust: dict | None = None, m
     return folder / "config.yaml"
 
 
-def diagnose(cfg_path: Path, candidates=None) -> dict:
-    return run_diagnose(load_config(cfg_path), sample=False, processes=1, candidates=candidates)
+def diagnose(cfg_path: Path, candidates=None, learn: bool = True) -> dict:
+    """``diagnose --no-sample``; ``learn=False`` skips the learned correction (tests of library formulas,
+    where it is not what is tested, run faster)."""
+    return run_diagnose(load_config(cfg_path), sample=False, processes=1, candidates=candidates, learn=learn)
 
 
 def pooled_ratio(rms: dict) -> float:
@@ -179,7 +181,7 @@ def test_diagnose_bad_config_is_one_line_error(tmp_path, capsys):
 @pytest.mark.slow
 @pytest.mark.parametrize("effect", ["wind", "ground_effect", "nonlinear_aero"])
 def test_concealed_effect_is_ranked_first_and_refit_reaches_the_noise(tmp_path, effect):
-    result = diagnose(make_run(tmp_path, CONCEALED[effect], seed=3))
+    result = diagnose(make_run(tmp_path, CONCEALED[effect], seed=3), learn=False)
     ratio = pooled_ratio(result["rms_before_mm"])
     assert 1.5 < ratio < 3.0, f"calibration drifted: base fit {ratio:.2f}× noise"
     assert result["verdict"] == "missing_physics"
@@ -212,6 +214,9 @@ def test_gust_is_located_and_reported_unexplained(tmp_path):
     assert all(abs(v / NOISE_MM - 1) < 0.15 for f, v in result["rms_before_mm"].items() if f != "a")
     # correlated noise is tried and absorbs part of the gust (ρ → 1), but whitens nothing: not the explanation
     assert result["noise"]["model"] == "white" and result["noise"]["ar1_explains"] is False, result["noise"]
+    # nor is the gust a smooth function of height, α and spin: the learned correction leaves it structured
+    ld = result["learned_discrepancy"]
+    assert not ld["selected"] or not ld["white"], ld
 
 
 @pytest.mark.slow
@@ -219,7 +224,7 @@ def test_wrong_marker_geometry_is_named(tmp_path):
     """The markers sit 3 mm off their configured body positions: a data explanation, not physics."""
     true = {k: list(v) for k, v in DEFAULT_MARKERS.items()}
     true["1"] = [true["1"][0] + 0.003, true["1"][1] - 0.002, true["1"][2]]
-    result = diagnose(make_run(tmp_path, {}, seed=3, markers=true))
+    result = diagnose(make_run(tmp_path, {}, seed=3, markers=true), learn=False)
     assert result["effects"][0]["id"] == "marker_geometry", result["words"]
     assert all(abs(v / NOISE_MM - 1) < 0.15 for v in result["rms_after_mm"].values())
     est = result["effects"][0]["estimate"]
@@ -229,7 +234,7 @@ def test_wrong_marker_geometry_is_named(tmp_path):
 @pytest.mark.slow
 def test_unsynchronised_markers_are_named(tmp_path):
     """Marker 1 recorded 0.3 ms late (synth's time_offset): a data explanation, not physics."""
-    result = diagnose(make_run(tmp_path, {"time_offset": {"dt_1": 0.0003}}, seed=3))
+    result = diagnose(make_run(tmp_path, {"time_offset": {"dt_1": 0.0003}}, seed=3), learn=False)
     assert result["effects"][0]["id"] == "time_offset", result["words"]
     assert all(abs(v / NOISE_MM - 1) < 0.15 for v in result["rms_after_mm"].values())
     est = result["effects"][0]["estimate"]["dt_1"]

@@ -12,6 +12,10 @@ Writes into the run's output folder:
   ``peak_height_m``), the noise floor the shares refer to (``noise_floor``: σ̂ per noise group from second
   differences), ``partial_explanation`` ({ids, share_explained, evidence} when the adopted terms only
   partly explain the data, else null), the candidates skipped (with the reason) and the diagnosis in words;
+* ``learned_discrepancy`` in ``diagnosis.json``: when the base model leaves structure, a sparse correction
+  in functions of height, α and spin learned without assuming a formula (:mod:`.discrepancy`): what it
+  selected, whether it whitens the residuals, the flight variable and family it names, and its curve
+  beside the fitted family's. It describes; it never changes the verdict or the effects;
 * ``diagnosis_residuals.npz``: the residual series before and after (report figures): per flight k and
   series name ``{k}_before_{name}``, ``{k}_after_{name}``, ``{k}_se_{name}`` (noise standard error),
   ``{k}_times_{name}`` [s], and ``{k}_times`` (the flight's first observation model's times);
@@ -43,14 +47,13 @@ from ..inference.data import build_problem, load_run_flights
 from ..inference.inertial import load_run_throws
 from ..inference.leastsq import fit_least_squares, refine_least_squares
 from ..inference.run import RESULT, run_sample
-from ..observation.registry import unit
+from ..observation.registry import PHYSICS_TERM, unit
 from ..physics import COEFFICIENT_NAMES
 from ..physics.discrepancy import coefficient_curve
-from .missing_physics import (CANDIDATES, EVIDENCE_THRESHOLD, SHARE_PARTIAL, Diagnosis, ModelFit,
-                              applicable_candidates, describe_where, diagnose, fingerprint, model_fit)
-from .missing_physics import SERIES_WORDS, onset_of_mismatch, onset_unavailable
 from .discrepancy import Z_KEEP, LearnedDiscrepancy, family_of, learn_discrepancy
-from .missing_physics import structured
+from .missing_physics import (CANDIDATES, EVIDENCE_THRESHOLD, SHARE_PARTIAL, Diagnosis, ModelFit,
+                              applicable_candidates, describe_where, diagnose, fingerprint, model_fit, structured)
+from .missing_physics import SERIES_WORDS, onset_of_mismatch, onset_unavailable
 from .residuals import noise_floor, peak_window
 
 logger = logging.getLogger(__name__)
@@ -276,7 +279,7 @@ def _family_fit(diag: Diagnosis, family: str | None):
     if family is None or not diag.rounds:
         return None
     cand = next((c for c in diag.rounds[0] if c.id == family), None)
-    if cand is None or unit(family).kind != "physics term":
+    if cand is None or unit(family).kind != PHYSICS_TERM:
         return None
     theta = dict(zip(cand.fit.problem.names, cand.fit.ls.theta))
     term = unit(family).obj

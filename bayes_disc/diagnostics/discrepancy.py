@@ -1,6 +1,6 @@
 """Learning what the model misses when no term of the library explains it.
 
-The base model is extended by the learned discrepancy of :mod:`bayes_disc.physics.discrepancy` (36
+The base model is extended by the learned discrepancy of :mod:`bayes_disc.physics.discrepancy` (46
 columns: five directions × functions of height, α and spin), and a sparse set of columns is selected by
 sequentially thresholded least squares on the model linearised at the base optimum (Brunton et al.'s
 SINDy selection, with z-scores in place of a fixed threshold):
@@ -11,7 +11,10 @@ SINDy selection, with z-scores in place of a fixed threshold):
    (columns are correlated: dropping all weak ones at once can drop the one that mattered);
 3. repeat until every active column has |z| ≥ ``Z_KEEP`` (at most ``MAX_ROUNDS`` rounds).
 
-The selected columns are then fitted with the full non-linear model (the others held at zero), and the
+The selected columns are then fitted with the full non-linear model (the others held at zero), from the
+linearised step and from the current point (the better kept); the model is linearised again where that
+refit ends and the selection repeated over every column, until it no longer changes or no longer lowers
+the cost (at most ``OUTER_ROUNDS``): the base optimum can lie far from the corrected one. The
 learned correction is judged like a candidate: ΔBIC over the base with k = the number of selected
 columns, whiteness of every flight's residuals after. Where it is concentrated — the share of its Wald
 statistic (c_gᵀ Σ_gg⁻¹ c_g over the columns of a flight variable g: height, α, spin, constant) — names the
@@ -37,6 +40,9 @@ Z_KEEP = 3.0
 MAX_ROUNDS = 12
 #: least share of the Wald statistic in one flight variable for it to be named
 CONCENTRATION_NAMED = 0.6
+#: linearise–select–refit rounds (the base optimum can be far from the corrected one: linearising once
+#: there selects well but starts the refit in the wrong place)
+OUTER_ROUNDS = 4
 #: the family of the library a (variable, main direction) belongs to
 FAMILY_VARIABLE = {("height", None): "ground_effect", ("alpha", None): "nonlinear_aero",
                    ("spin", "side"): "side_force", ("spin", "lift"): "spin_lift", ("spin", "roll"): "roll_spin_coupling"}
@@ -74,16 +80,20 @@ def select_columns(J: np.ndarray, r: np.ndarray, keep: np.ndarray, candidates: n
         The selected columns (subset of ``candidates``).
     z : (m',) array
         Their final z-scores.
+    step : (dim,) array
+        The linearised least-squares step of the final selection (zero for the columns left out).
     """
     active = np.array(candidates, int)
-    z = np.zeros(0)
+    z, step = np.zeros(0), np.zeros(J.shape[1])
     for _ in range(max_rounds):
-        if active.size == 0:
-            break
         cols = np.r_[np.flatnonzero(keep), active]
         A = J[:, cols]
         cov = covariance_from_jacobian(A)
         delta = -cov @ (A.T @ r)
+        step = np.zeros(J.shape[1])
+        step[cols] = delta
+        if active.size == 0:
+            break
         z = delta[-active.size:] / np.sqrt(np.maximum(np.diag(cov)[-active.size:], 1e-300))
         weak = np.flatnonzero(np.abs(z) < z_keep)
         if weak.size == 0:
@@ -92,7 +102,7 @@ def select_columns(J: np.ndarray, r: np.ndarray, keep: np.ndarray, candidates: n
         mask = np.ones(active.size, bool)
         mask[weak] = False
         active, z = active[mask], z[mask]
-    return active, z
+    return active, z, step
 
 
 @dataclass
@@ -145,6 +155,19 @@ class LearnedDiscrepancy:
         return value, np.sqrt(np.maximum(var, 0.0))
 
 
+def _score(problem, theta: np.ndarray) -> float:
+    """Σ_g n_g ln S_g at θ: the profile negative log-likelihood (×2, up to a constant) with every noise
+    group's σ profiled out; lower is better."""
+    return float(np.sum(problem.n_coords * np.log(problem.sum_squares(theta[None])[0])))
+
+
+def _zeroed(x: np.ndarray, columns: np.ndarray, kept: np.ndarray) -> np.ndarray:
+    """x with the correction's ``columns`` not in ``kept`` set to zero."""
+    out = x.copy()
+    out[np.setdiff1d(columns, kept)] = 0.0
+    return out
+
+
 def flown_range(fit: ModelFit) -> dict:
     """{variable: (5th percentile, median, 95th percentile)} over every flight's fitted trajectory: height z
     [m], α [rad], advance ratio μ = r d / 2|v_a|."""
@@ -195,22 +218,38 @@ def learn_discrepancy(base: ModelFit, build, max_nfev: int = 200, log=lambda msg
         None when no column is selected.
     """
     p = build(base.ids + (DISCREPANCY.id,))
-    x0 = extend_theta(base.ls.theta, base.problem, p)
+    x = extend_theta(base.ls.theta, base.problem, p)
     sigma = base.ls.sigma
-    J = whitened_jacobian(x0, p, sigma)
-    r = whitened_residuals(x0, p, sigma)
     idx = np.array([p.layout.index(column_name(d, f)) for d, f in COLUMNS])
     keep = np.ones(p.dim, bool)
     keep[idx] = False
-    selected, z = select_columns(J, r, keep, idx)
-    if selected.size == 0:
+    selected, ls, cost = np.zeros(0, int), None, np.inf
+    for it in range(OUTER_ROUNDS):
+        # linearise where the last refit ended (the base optimum at first) and select again from every column
+        J, r = whitened_jacobian(x, p, sigma), whitened_residuals(x, p, sigma)
+        chosen, _, step = select_columns(J, r, keep, idx)
+        if chosen.size == 0:
+            break
+        if ls is not None and set(chosen) == set(selected):
+            break
+        free = keep.copy()
+        free[chosen] = True
+        start = x.copy()
+        start[idx] = 0.0
+        start[free] += step[free]
+        log(f"  learned discrepancy, round {it + 1}: {chosen.size} columns "
+            f"({', '.join(p.names[j] for j in chosen)}); refitting")
+        trial = [refine_least_squares(p, x0, max_nfev=max_nfev, free=free) for x0 in (start, _zeroed(x, idx, chosen))]
+        scores = [_score(p, t.theta) for t in trial]
+        best, score = trial[int(np.argmin(scores))], min(scores)
+        if ls is not None and score >= cost:
+            break
+        selected, ls, cost = chosen, best, score
+        x, sigma = best.theta, best.sigma
+    if ls is None:
         log("  learned discrepancy: no column of the correction is significant")
         return None
     names = [p.names[j] for j in selected]
-    log(f"  learned discrepancy: {len(names)} columns selected ({', '.join(names)}); refitting")
-    free = keep.copy()
-    free[selected] = True
-    ls = refine_least_squares(p, x0, max_nfev=max_nfev, free=free)
     fit = model_fit(p, ls, base.ids + (DISCREPANCY.id,))
     n = base.problem.n_coords.astype(float)
     delta_bic = float(np.sum(n * np.log(base.ss / fit.ss)) - selected.size * np.log(n.sum()))

@@ -13,7 +13,8 @@ function) column (:mod:`bayes_disc.diagnostics.discrepancy` selects the columns)
 with z the height of the centre of mass [m], α the angle of attack [rad], μ = r d / 2|v_a| the advance
 ratio, and the functions (:data:`FUNCTIONS`)
 
-    h01, h03, h09 = exp(−z/0.1 m), exp(−z/0.3 m), exp(−z/0.9 m)     (height: ground effects)
+    h005, h01, h02, h04, h08 = exp(−z/h) for h = 0.05, 0.1, 0.2, 0.4, 0.8 m   (height: ground effects;
+                                                           sums of them follow decays of other laws)
     a2, a3        = α², α³                                       (angle of attack beyond the model)
     mu1, mu3      = μ, μ³                                        (spin)
     c             = 1                                            (a constant)
@@ -36,11 +37,12 @@ from .terms import (CTX_ALPHA, CTX_AREA, CTX_D1X, CTX_D1Y, CTX_D1Z, CTX_D2X, CTX
 #: directions of the correction: forces along lift, drag, side; moments about the pitch and roll axes
 DIRECTIONS = ("lift", "drag", "side", "pitch", "roll")
 #: basis functions: id → (flight variable, formula)
-FUNCTIONS = {"h01": ("height", "exp(−z/0.1 m)"), "h03": ("height", "exp(−z/0.3 m)"),
-             "h09": ("height", "exp(−z/0.9 m)"), "a2": ("alpha", "α²"), "a3": ("alpha", "α³"),
+FUNCTIONS = {"h005": ("height", "exp(−z/0.05 m)"), "h01": ("height", "exp(−z/0.1 m)"),
+             "h02": ("height", "exp(−z/0.2 m)"), "h04": ("height", "exp(−z/0.4 m)"),
+             "h08": ("height", "exp(−z/0.8 m)"), "a2": ("alpha", "α²"), "a3": ("alpha", "α³"),
              "mu1": ("spin", "μ"), "mu3": ("spin", "μ³"), "c": ("constant", "1")}
 #: decay heights [m] of the height functions, in FUNCTIONS order
-HEIGHTS = (0.1, 0.3, 0.9)
+HEIGHTS = (0.05, 0.1, 0.2, 0.4, 0.8)
 #: (direction, function) columns that duplicate a base-model coefficient (C_L0, C_D0, C_Dα, C_M0)
 BASE_COLUMNS = {("lift", "c"), ("drag", "c"), ("drag", "a2"), ("pitch", "c")}
 #: the columns of the correction, in parameter order
@@ -60,10 +62,9 @@ def column_name(direction: str, function: str) -> str:
 
 def basis(z, alpha, mu) -> np.ndarray:
     """The functions φ_f of :data:`FUNCTIONS` at arrays of height z [m], α [rad] and μ (broadcast);
-    returns (8, …)."""
+    returns (10, …)."""
     z, alpha, mu = np.broadcast_arrays(np.asarray(z, float), np.asarray(alpha, float), np.asarray(mu, float))
-    return np.stack([np.exp(-z / HEIGHTS[0]), np.exp(-z / HEIGHTS[1]), np.exp(-z / HEIGHTS[2]), alpha ** 2,
-                     alpha ** 3, mu, mu ** 3, np.ones_like(z)])
+    return np.stack([np.exp(-z / h) for h in HEIGHTS] + [alpha ** 2, alpha ** 3, mu, mu ** 3, np.ones_like(z)])
 
 
 @nb.njit(inline="always", cache=True)
@@ -71,7 +72,8 @@ def _discrepancy_loads(E, off, b, ctx):
     """ΔC_X = Σ c_X,f φ_f; forces × Q A along lift, drag and d2, moments × Q A d about d2 and d1."""
     z, a = ctx[CTX_Z], ctx[CTX_ALPHA]
     mu = _advance_ratio(ctx)
-    phi = (math.exp(-z / 0.1), math.exp(-z / 0.3), math.exp(-z / 0.9), a * a, a * a * a, mu, mu * mu * mu, 1.0)
+    phi = (math.exp(-z / 0.05), math.exp(-z / 0.1), math.exp(-z / 0.2), math.exp(-z / 0.4), math.exp(-z / 0.8),
+           a * a, a * a * a, mu, mu * mu * mu, 1.0)
     dc0 = 0.0
     dc1 = 0.0
     dc2 = 0.0
@@ -106,7 +108,7 @@ DISCREPANCY = Term(
     title="Learned discrepancy: a sparse correction to lift, drag, side force, pitching and rolling moment "
     "in functions of height, angle of attack and spin",
     equations="ΔC_X = Σ_f c_X,f φ_f(z, α, μ) for X = lift, drag, side (× Q A), pitch, roll (× Q A d); "
-    "φ: exp(−z/0.1), exp(−z/0.3), exp(−z/0.9), α², α³, μ, μ³, 1",
+    "φ: exp(−z/h) for h = 0.05, 0.1, 0.2, 0.4, 0.8 m, α², α³, μ, μ³, 1",
     parameters=tuple(TermParameter(column_name(d, f), "1", f"{d} correction × {FUNCTIONS[f][1]}",
                                    prior_sd=PRIOR_SD) for d, f in COLUMNS),
     loads=_discrepancy_loads,
