@@ -299,6 +299,13 @@ class DiagnosisResult:
         return self.raw["words"]
 
     @property
+    def learned(self) -> dict | None:
+        """The learned correction (``learned_discrepancy`` of ``diagnosis.json``: selected columns, ΔBIC,
+        whiteness, the flight variable and family it names, its curve), or None when the base model left
+        white residuals."""
+        return self.raw.get("learned_discrepancy")
+
+    @property
     def summary(self):
         """Every candidate term tried.
 

@@ -297,7 +297,8 @@ def learned_record(learned: LearnedDiscrepancy, diag: Diagnosis) -> dict:
     rec = {"selected": len(learned.names),
            "columns": {n: {"value": float(v), "sd": float(s)} for n, v, s in zip(learned.names, learned.values,
                                                                                    learned.sd)},
-           "evidence": learned.delta_bic, "white": learned.white, "rms_after_mm": learned.fit.rms_mm,
+           "evidence": learned.delta_bic, "white": learned.white, "share_explained": learned.share,
+           "rms_after_mm": learned.fit.rms_mm,
            "rms_after": learned.fit.rms, "concentration": learned.concentration,
            "direction_share": learned.direction_share, "variable": learned.variable, "direction": direction,
            "family": learned.family, "flown": learned.flown,
@@ -326,12 +327,16 @@ def learned_words(result: dict) -> str | None:
         return f"A correction learned in height, α and spin finds nothing significant ({ld['reason']})."
     conc = sorted(ld["concentration"].items(), key=lambda t: -t[1])
     where = ", ".join(f"{v} {100 * s:.0f} %" for v, s in conc)
+    share = ld.get("share_explained")
+    result_text = ("leaves white residuals" if ld["white"] else
+                   f"removes {_share_text(share)} of the excess misfit but leaves some structure")
     text = (f"A correction learned in functions of height, α and spin ({ld['selected']} of them selected, ΔBIC "
-            f"{ld['evidence']:,.0f}) {'leaves white residuals' if ld['white'] else 'still leaves structure'}; "
-            f"its evidence lies in {where}, mostly in {ld['direction']}")
+            f"{ld['evidence']:,.0f}) {result_text}; its evidence lies in {where}, mostly in {ld['direction']}")
     fam = ld.get("family")
-    if fam and ld["white"]:
-        text += f": the missing physics is a function of {ld['variable']}, the {effect_name(fam)} family"
+    explains = ld["white"] or (share is not None and np.isfinite(share) and share >= SHARE_PARTIAL)
+    if fam:
+        text += (f": the missing physics is {'' if ld['white'] else 'mainly '}a function of {ld['variable']}, the "
+                 f"{effect_name(fam)} family")
         curve = ld.get("curve") or {}
         named = [e["id"] for e in result.get("effects") or []]
         if fam in named and curve.get("family") is not None:
@@ -339,7 +344,7 @@ def learned_words(result: dict) -> str | None:
                                       f"; its {ld['direction']} curve departs from the fitted {effect_name(fam)} "
                                       "form beyond two standard deviations (see the report's curve)")
         text += "."
-    elif not ld["white"]:
+    elif not explains:
         text += (": the mismatch is not a smooth function of the flight state the library's terms use "
                  "(a disturbance, or physics outside these variables).")
     else:

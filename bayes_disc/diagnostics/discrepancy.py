@@ -11,16 +11,18 @@ SINDy selection, with z-scores in place of a fixed threshold):
    (columns are correlated: dropping all weak ones at once can drop the one that mattered);
 3. repeat until every active column has |z| ≥ ``Z_KEEP`` (at most ``MAX_ROUNDS`` rounds).
 
-The selected columns are then fitted with the full non-linear model (the others held at zero), from the
-linearised step and from the current point (the better kept); the model is linearised again where that
-refit ends and the selection repeated over every column, until it no longer changes or no longer lowers
-the cost (at most ``OUTER_ROUNDS``): the base optimum can lie far from the corrected one. The
-learned correction is judged like a candidate: ΔBIC over the base with k = the number of selected
-columns, whiteness of every flight's residuals after. Where it is concentrated — the share of its Wald
+The selected columns are then fitted with the full non-linear model (the others held at zero), starting
+from the linearised step; the model is linearised again where that refit ends and the selection repeated
+over every column, until it no longer changes or no longer lowers Σ_g n_g ln S_g (at most
+``OUTER_ROUNDS``): the base optimum can lie far from the corrected one. The learned correction is judged like a candidate: ΔBIC over the base with k = the number of selected
+columns, whiteness of every flight's residuals after, and its share of the base model's excess misfit
+(:func:`.missing_physics.excess_share`). Where it is concentrated — the share of its Wald
 statistic (c_gᵀ Σ_gg⁻¹ c_g over the columns of a flight variable g: height, α, spin, constant) — names the
 flight variable and so the family of the library the effect belongs to (height → ground effect, α →
 non-linear aerodynamics, spin → side force, spin lift or roll coupling by direction) when one variable
-holds at least ``CONCENTRATION_NAMED`` of it. The correction's curve against that variable, with its
+holds at least ``CONCENTRATION_NAMED`` of it and the correction leaves white residuals or removes at least
+``SHARE_PARTIAL`` of the excess misfit (a correction that removes little names nothing: the mismatch is not
+a smooth function of these variables — a gust, say). The correction's curve against that variable, with its
 band, is what the model was missing, in the user's terms.
 """
 from __future__ import annotations
@@ -31,7 +33,7 @@ import numpy as np
 
 from ..inference.leastsq import covariance_from_jacobian, refine_least_squares, whitened_jacobian, whitened_residuals
 from ..physics.discrepancy import COLUMNS, DISCREPANCY, DIRECTIONS, FUNCTIONS, basis, column_name
-from .missing_physics import ModelFit, extend_theta, model_fit, structured
+from .missing_physics import SHARE_PARTIAL, ModelFit, excess_share, extend_theta, model_fit, structured
 from .residuals import channel_runs
 
 #: least |z| of a kept column
@@ -121,13 +123,20 @@ class LearnedDiscrepancy:
     concentration: dict
     direction_share: dict
     flown: dict = field(default_factory=dict)
+    share: float = float("nan")
+
+    @property
+    def explains(self) -> bool:
+        """White residuals after, or at least ``SHARE_PARTIAL`` of the base model's excess misfit removed."""
+        return self.white or (np.isfinite(self.share) and self.share >= SHARE_PARTIAL)
 
     @property
     def variable(self) -> str | None:
         """The flight variable that holds at least ``CONCENTRATION_NAMED`` of the correction (not the
-        constant), or None."""
+        constant) when the correction :attr:`explains` the mismatch, or None."""
         v, share = max(self.concentration.items(), key=lambda t: t[1]) if self.concentration else (None, 0.0)
-        return v if v not in (None, "constant") and share >= CONCENTRATION_NAMED else None
+        named = v not in (None, "constant") and share >= CONCENTRATION_NAMED and self.explains
+        return v if named else None
 
     @property
     def direction(self) -> str | None:
@@ -159,13 +168,6 @@ def _score(problem, theta: np.ndarray) -> float:
     """Σ_g n_g ln S_g at θ: the profile negative log-likelihood (×2, up to a constant) with every noise
     group's σ profiled out; lower is better."""
     return float(np.sum(problem.n_coords * np.log(problem.sum_squares(theta[None])[0])))
-
-
-def _zeroed(x: np.ndarray, columns: np.ndarray, kept: np.ndarray) -> np.ndarray:
-    """x with the correction's ``columns`` not in ``kept`` set to zero."""
-    out = x.copy()
-    out[np.setdiff1d(columns, kept)] = 0.0
-    return out
 
 
 def flown_range(fit: ModelFit) -> dict:
@@ -239,9 +241,8 @@ def learn_discrepancy(base: ModelFit, build, max_nfev: int = 200, log=lambda msg
         start[free] += step[free]
         log(f"  learned discrepancy, round {it + 1}: {chosen.size} columns "
             f"({', '.join(p.names[j] for j in chosen)}); refitting")
-        trial = [refine_least_squares(p, x0, max_nfev=max_nfev, free=free) for x0 in (start, _zeroed(x, idx, chosen))]
-        scores = [_score(p, t.theta) for t in trial]
-        best, score = trial[int(np.argmin(scores))], min(scores)
+        best = refine_least_squares(p, start, max_nfev=max_nfev, rounds=1, free=free)
+        score = _score(p, best.theta)
         if ls is not None and score >= cost:
             break
         selected, ls, cost = chosen, best, score
@@ -259,8 +260,10 @@ def learn_discrepancy(base: ModelFit, build, max_nfev: int = 200, log=lambda msg
         white=not any(structured(fit).values()),
         concentration=_wald_shares(names, values, cov, lambda d, f: FUNCTIONS[f][0]),
         direction_share=_wald_shares(names, values, cov, lambda d, f: d),
-        flown=flown_range(base))
+        flown=flown_range(base),
+        share=excess_share(base.ss, fit.ss, base.noise_floor, base.problem.n_coords))
     log(f"  learned discrepancy: ΔBIC {delta_bic:.1f}, residuals {'white' if learned.white else 'structured'}, "
+        f"share of the excess misfit {learned.share:.2f}, "
         + ", ".join(f"{v} {s:.2f}" for v, s in sorted(learned.concentration.items(), key=lambda t: -t[1])))
     return learned
 
