@@ -537,7 +537,7 @@ def identifiability(config, *, output=None, profiles: bool = False, design: bool
 
 
 def diagnose(config, *, output=None, sample: bool = True, processes: int = 2, progress: bool = True,
-             report: bool = False, base_dir=None) -> DiagnosisResult:
+             report: bool = False, base_dir=None, learn: bool = True) -> DiagnosisResult:
     """Name the physics the model misses (and resample with it), as ``bayes-disc diagnose``.
 
     Parameters
@@ -556,6 +556,8 @@ def diagnose(config, *, output=None, sample: bool = True, processes: int = 2, pr
         Also rebuild ``reports/<name>.html`` when the folder holds a sampled run.
     base_dir : str or Path, optional
         For a dict config: folder of its relative paths.
+    learn : bool
+        Learn a correction in height, α and spin when the base model leaves structure.
 
     Returns
     -------
@@ -565,7 +567,7 @@ def diagnose(config, *, output=None, sample: bool = True, processes: int = 2, pr
     from . import pipeline
     cfg = run_config(config, output=output, base_dir=base_dir)
     outcome = pipeline.diagnose(cfg, sample=sample, processes=processes, progress=progress, report=report,
-                                reports_dir=pipeline.reports_dir(output))
+                                reports_dir=pipeline.reports_dir(output), learn=learn)
     return DiagnosisResult(output=Path(cfg.output), raw=outcome.result)
 
 

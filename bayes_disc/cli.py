@@ -71,7 +71,7 @@ def _cmd_diagnose(args) -> int:
     from .inference.config import load_config
     cfg = load_config(args.config, output_override=args.output)
     pipeline.diagnose(cfg, sample=not args.no_sample, processes=args.processes, progress=not args.no_progress,
-                      reports_dir=pipeline.reports_dir(args.output))
+                      reports_dir=pipeline.reports_dir(args.output), learn=not args.no_learn)
     return 0
 
 
@@ -209,6 +209,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("config", help="run configuration YAML (keys: docs/configuration.md)")
     p.add_argument("--no-sample", action="store_true",
                    help="least-squares estimates only (no emcee resampling with the accepted terms)")
+    p.add_argument("--no-learn", action="store_true",
+                   help="skip the learned correction in height, α and spin when no term explains the data "
+                   "(it costs several refits with up to 46 extra parameters)")
     p.add_argument("--processes", type=_positive_int, default=2, help="parallel candidate fits (default 2)")
     p.add_argument("--output", metavar="DIR",
                    help="override the config's output folder; the rebuilt report then goes to DIR/reports/<name>.html")

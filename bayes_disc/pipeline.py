@@ -118,7 +118,7 @@ def identifiability(cfg: RunConfig, *, profiles: bool = False, design: bool = Tr
 
 
 def diagnose(cfg: RunConfig, *, sample: bool = True, processes: int = 2, progress: bool = True,
-             report: bool = True, reports_dir=DEFAULT_REPORTS_DIR) -> Outcome:
+             report: bool = True, reports_dir=DEFAULT_REPORTS_DIR, learn: bool = True) -> Outcome:
     """``bayes-disc diagnose``: name the missing physics (and resample), then rebuild the run's report.
 
     Parameters
@@ -136,6 +136,8 @@ def diagnose(cfg: RunConfig, *, sample: bool = True, processes: int = 2, progres
         includes the diagnosis); otherwise say how to get one.
     reports_dir : str or Path
         Folder of the HTML report (relative: to the working directory).
+    learn : bool
+        Learn a correction when the base model leaves structure (``learned_discrepancy``).
 
     Returns
     -------
@@ -143,7 +145,7 @@ def diagnose(cfg: RunConfig, *, sample: bool = True, processes: int = 2, progres
         ``result``: the diagnosis.json content; ``report``: the HTML file or None.
     """
     logger.debug(f"diagnose: configuration {cfg.path}, output {cfg.output}")
-    result = run_diagnose(cfg, sample=sample, processes=processes, progress=progress)
+    result = run_diagnose(cfg, sample=sample, processes=processes, progress=progress, learn=learn)
     out = Path(cfg.output)
     path = None
     if report:
