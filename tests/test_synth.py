@@ -194,3 +194,14 @@ def test_bad_defects_name_the_key(tmp_path, key):
     with pytest.raises(ConfigError) as e:
         load_synth_spec(p)
     assert f"key '{key}'" in str(e.value), str(e.value)
+
+
+def test_a_gust_moves_the_flight_only_from_its_start():
+    """A gust (wind during a window of one flight) with no wind term in the data: the flight is the same as
+    without it before the gust and departs after."""
+    f = LaunchSpec(name="g", speed=12.0, alpha_deg=6, spin=60, duration=0.6, noise_mm=0.0)
+    calm = synthesize(SynthSpec(name="s", flights=(f,))).flights[0].positions
+    gusty = synthesize(SynthSpec(name="s", flights=(replace(f, gust=(0.2, 0.4, 0.0, 4.0, 0.0)),))).flights[0]
+    t = gusty.times
+    diff = np.nanmax(np.abs(gusty.positions - calm), axis=(1, 2))
+    assert np.all(diff[t < 0.2] < 1e-9) and diff[-1] > 5e-3

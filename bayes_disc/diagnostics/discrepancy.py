@@ -11,8 +11,9 @@ SINDy selection, with z-scores in place of a fixed threshold):
    (columns are correlated: dropping all weak ones at once can drop the one that mattered);
 3. repeat until every active column has |z| ≥ ``Z_KEEP`` (at most ``MAX_ROUNDS`` rounds).
 
-The selected columns are then fitted with the full non-linear model (the others held at zero), starting
-from the linearised step; the model is linearised again where that refit ends and the selection repeated
+The selected columns are then fitted with the full non-linear model (the others held at zero), from the
+linearised step and from the current point (the better kept: with one start only, the refit from a base
+far from the corrected optimum stalls with the misfit still several times the noise); the model is linearised again where that refit ends and the selection repeated
 over every column, until it no longer changes or no longer lowers Σ_g n_g ln S_g (at most
 ``OUTER_ROUNDS``): the base optimum can lie far from the corrected one. The learned correction is judged like a candidate: ΔBIC over the base with k = the number of selected
 columns, whiteness of every flight's residuals after, and its share of the base model's excess misfit
@@ -170,6 +171,13 @@ def _score(problem, theta: np.ndarray) -> float:
     return float(np.sum(problem.n_coords * np.log(problem.sum_squares(theta[None])[0])))
 
 
+def _zeroed(x: np.ndarray, columns: np.ndarray, kept: np.ndarray) -> np.ndarray:
+    """x with the correction's ``columns`` not in ``kept`` set to zero (the other start of a refit)."""
+    out = x.copy()
+    out[np.setdiff1d(columns, kept)] = 0.0
+    return out
+
+
 def flown_range(fit: ModelFit) -> dict:
     """{variable: (5th percentile, median, 95th percentile)} over every flight's fitted trajectory: height z
     [m], α [rad], advance ratio μ = r d / 2|v_a|."""
@@ -241,8 +249,9 @@ def learn_discrepancy(base: ModelFit, build, max_nfev: int = 200, log=lambda msg
         start[free] += step[free]
         log(f"  learned discrepancy, round {it + 1}: {chosen.size} columns "
             f"({', '.join(p.names[j] for j in chosen)}); refitting")
-        best = refine_least_squares(p, start, max_nfev=max_nfev, rounds=1, free=free)
-        score = _score(p, best.theta)
+        trial = [refine_least_squares(p, x0, max_nfev=max_nfev, free=free) for x0 in (start, _zeroed(x, idx, chosen))]
+        scores = [_score(p, t.theta) for t in trial]
+        best, score = trial[int(np.argmin(scores))], min(scores)
         if ls is not None and score >= cost:
             break
         selected, ls, cost = chosen, best, score

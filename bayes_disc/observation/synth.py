@@ -220,7 +220,9 @@ def _simulate_flight(spec: SynthSpec, f: LaunchSpec, y0: np.ndarray, times: np.n
                 ee = ext.copy()
                 ee[j: j + 3] += gust
             else:
-                tt, ee = terms + get_terms(["wind"]), np.r_[ext, gust]
+                (wind,) = get_terms(["wind"])
+                shape = [p.off_value for p in wind.parameters[3:]]          # no shear: the gust is uniform
+                tt, ee = terms + (wind,), np.r_[ext, gust, shape]
         tr = simulate(y, spec.coefficients.as_array(), ts, t0=t0, disc=spec.disc, env=spec.env, marker_body=mb,
                       terms=tt, extension=ee if ee.size else None)
         if not tr.ok[0]:
