@@ -257,6 +257,9 @@ def words(result: dict) -> str:
             f"{c['id']} (ΔBIC {c['evidence']:.1f} but leaves structure and removes only "
             f"{_share_text(c.get('share_explained'))} of the excess misfit, less than {100 * SHARE_PARTIAL:.0f} %)"
             for c in rejected[:4]) + ".")
+    learned = learned_words(result)
+    if learned:
+        lines.append(learned)
     if skipped:
         lines.append("Not tried: " + ", ".join(f"{c} ({why})" for c, why in skipped.items()) + ".")
     return "\n".join(lines)
