@@ -448,8 +448,8 @@ CURVE_AXES = {"height": ("height z [m]", 1.0), "alpha": ("angle of attack α [de
 def learned_curve_figure(curve: dict, generating: np.ndarray | None = None, generating_label: str = "") -> Figure:
     """The learned correction ΔC against one flight variable (line and ±2 sd band), beside the library
     family fitted as a candidate (dashed) and, for synthetic data, the curve that generated the data (black).
-    ``curve``: ``learned_discrepancy.curve`` of ``diagnosis.json``; the flown range (5th–95th percentile) is
-    shaded."""
+    ``curve``: ``learned_discrepancy.curve`` of ``diagnosis.json`` (its grid starts at the ground; below the
+    flown heights the curves are extrapolations)."""
     label, scale = CURVE_AXES[curve["variable"]]
     x = np.asarray(curve["grid"], float) * scale
     value, sd = np.asarray(curve["value"], float), np.asarray(curve["sd"], float)
