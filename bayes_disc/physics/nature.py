@@ -23,7 +23,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 
 from .terms import (CTX_AREA, CTX_ALPHA, CTX_D2X, CTX_D2Y, CTX_D2Z, CTX_DIAM, CTX_Q, CTX_Z, Term, TermParameter,
-                    _advance_ratio, _lift_drag_force)
+                    _advance_ratio, _lift_drag_force, select_terms)
 from .windtunnel import load_wind_tunnel, wind_tunnel_shape
 
 
@@ -149,10 +149,5 @@ FAMILY = {"ground_effect_power": "ground_effect", "wind_tunnel_aero": "nonlinear
 
 
 def get_nature(ids) -> tuple[Term, ...]:
-    """Forms of nature by id, in the order given; an unknown id raises KeyError naming the known ones."""
-    out = []
-    for i in ids:
-        if i not in NATURE:
-            raise KeyError(f"unknown form of nature {i!r}; known: {sorted(NATURE)}")
-        out.append(NATURE[i])
-    return tuple(out)
+    """Forms of nature by id, in the order given (:func:`.terms.select_terms`: unknown ids name the known)."""
+    return select_terms(NATURE, ids, "form of nature")

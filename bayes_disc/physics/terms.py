@@ -277,14 +277,20 @@ TERMS: dict[str, Term] = {t.id: t for t in (SIDE_FORCE, WIND, GROUND_EFFECT, NON
                                              ROLL_SPIN_COUPLING)}
 
 
-def get_terms(ids) -> tuple[Term, ...]:
-    """Terms by SPEC id, in the order given; unknown ids raise KeyError naming the known ones."""
+def select_terms(registry: dict, ids, what: str = "physics term") -> tuple[Term, ...]:
+    """Terms of ``registry`` by id, in the order given; an unknown id raises KeyError naming the known ones,
+    an id listed twice ValueError."""
     out = []
     for i in ids:
-        if i not in TERMS:
-            raise KeyError(f"unknown physics term {i!r}; known: {sorted(TERMS)}")
-        out.append(TERMS[i])
+        if i not in registry:
+            raise KeyError(f"unknown {what} {i!r}; known: {sorted(registry)}")
+        out.append(registry[i])
     if len({t.id for t in out}) != len(out):
-        raise ValueError(f"physics terms listed twice: {list(ids)}")
+        raise ValueError(f"{what}s listed twice: {list(ids)}")
     return tuple(out)
+
+
+def get_terms(ids) -> tuple[Term, ...]:
+    """Terms by SPEC id (:data:`TERMS`), in the order given (:func:`select_terms`)."""
+    return select_terms(TERMS, ids)
 
