@@ -29,7 +29,7 @@ from bayes_disc.inference.sampler import n_walkers  # noqa: E402
 
 def logprob_time(cfg, repeats: int = 15) -> tuple[float, int]:
     problem = build_problem(cfg)
-    nw = n_walkers(cfg.sampler, problem.dim)
+    nw = n_walkers(cfg.sampler, problem)
     rng = np.random.default_rng(0)
     theta = problem.prior_mean + 1e-3 * problem.prior_sd * rng.standard_normal((nw, problem.dim))
     problem.log_prob(theta)  # compile

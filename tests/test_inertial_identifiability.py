@@ -10,7 +10,7 @@ import pytest
 from bayes_disc.cli import main
 from bayes_disc.diagnostics.identifiability import (PRIOR_DOMINATED, RELATIVE_SD, coefficient_information,
                                                     data_description, design_skip_reason, verdicts_from_covariance)
-from bayes_disc.inference.leastsq import covariance_from_jacobian, whitened_jacobian
+from bayes_disc.inference.leastsq import covariance_from_jacobian, jacobian_blocks
 from bayes_disc.inference.model import Problem
 from bayes_disc.observation.inertial_synth import LoggerSpec, synthetic_log
 from bayes_disc.observation.models.inertial import InertialMeasurements
@@ -50,8 +50,7 @@ def _problem_at_truth():
 def at_truth():
     p, theta = _problem_at_truth()
     sigma = np.tile([SPEC.gyro_noise[0], SPEC.gyro_noise[1], SPEC.acc_noise[0], SPEC.acc_noise[1]], len(LAUNCHES))
-    J = whitened_jacobian(theta, p, sigma)
-    return p, theta, J
+    return p, theta, jacobian_blocks(theta, p, sigma)
 
 
 def test_marginal_information_matches_the_laplace_covariance(at_truth):
@@ -61,8 +60,8 @@ def test_marginal_information_matches_the_laplace_covariance(at_truth):
     p, theta, J = at_truth
     nc = p.ic_start
     assert nc == p.n_coef + 6                                  # ten coefficients and the logger's mount
-    info = coefficient_information(p, J)
-    cov = covariance_from_jacobian(J)
+    info = coefficient_information(p, J)          # Schur complement of the block-arrow information
+    cov = covariance_from_jacobian(J.dense())     # dense Laplace covariance
     sd_schur = np.sqrt(np.diag(np.linalg.inv(info + np.diag(1.0 / p.prior_sd[:nc] ** 2))))
     sd_laplace = np.sqrt(np.diag(cov)[:nc])
     np.testing.assert_allclose(sd_schur, sd_laplace, rtol=0.02)
@@ -73,7 +72,7 @@ def test_marginal_information_matches_the_laplace_covariance(at_truth):
 def test_verdicts_follow_the_widths_and_speak_of_inertial_data(at_truth):
     p, theta, J = at_truth
     nc = p.ic_start
-    cov = covariance_from_jacobian(J)[:nc, :nc]
+    cov = J.information().inverse()[:nc, :nc]
     data = data_description(p)
     assert (data["markers"], data["inertial"], data["inertial_only"]) == (0, 2, 2)
     assert "only through the forces and moments" in data["text"]

@@ -8,7 +8,7 @@ from scipy.integrate import quad
 from scipy.stats import multivariate_normal
 
 from bayes_disc.inference.initial import initial_state_from_data
-from bayes_disc.inference.leastsq import refine_least_squares
+from bayes_disc.inference.leastsq import _rms, jacobian_blocks, refine_least_squares
 from bayes_disc.inference.model import Problem
 from bayes_disc.observation.markers import FlightObservation, flights_from_table, read_marker_csv
 from bayes_disc.observation.models import MarkerPositions, gaussian_marginal_loglik
@@ -228,7 +228,10 @@ def test_least_squares_estimates_rho_of_ar1_noise(clean):
 def test_per_point_errors_weight_the_fit(clean):
     """10× noise on the second half of the flight: with sigma_m the scale factor is ≈ 1 and the fit's
     coefficient uncertainties are smaller, overall, than with one σ for the flight (a coefficient pinned by its
-    prior may not gain)."""
+    prior may not gain). Both covariances are taken at the per-point optimum: this 0.5 s flight leaves CM0–CMa
+    in a flat, curved valley where the one-σ fit's optimum (and its local curvature, ×6 in CM0's sd) depends on
+    the minimiser's path (scipy's TRF and the block Levenberg–Marquardt stop 0.16 apart in cost), which is not
+    what the weighting changes."""
     rng = np.random.default_rng(12)
     n = clean.times.size
     s = np.where(np.arange(n)[:, None] < n // 2, 1e-3, 1e-2) * np.ones(clean.positions.shape[:2])
@@ -238,8 +241,9 @@ def test_per_point_errors_weight_the_fit(clean):
     ls_pp = _fit(per_point)
     g = per_point.channels[0][0].noise.points.reference
     assert 0.8 < ls_pp.sigma[0] / g < 1.25, ls_pp.sigma[0] / g
-    ls_one = _fit(_problem(noisy, per_point="false"))
-    sd_pp, sd_one = np.sqrt(np.diag(ls_pp.cov))[:10], np.sqrt(np.diag(ls_one.cov))[:10]
+    one = _problem(noisy, per_point="false")
+    cov_one = jacobian_blocks(ls_pp.theta, one, _rms(one, ls_pp.theta)).information().inverse()
+    sd_pp, sd_one = np.sqrt(np.diag(ls_pp.cov))[:10], np.sqrt(np.diag(cov_one))[:10]
     assert np.exp(np.mean(np.log(sd_pp / sd_one))) < 0.85, sd_pp / sd_one
 
 

@@ -40,7 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..inference.leastsq import whitened_jacobian
+from ..inference.arrow import ArrowJacobian
+from ..inference.leastsq import jacobian_blocks
 from ..inference.model import Problem
 from ..observation.markers import FlightObservation
 from ..observation.models import MarkerPositions
@@ -88,17 +89,25 @@ def flight_envelopes(problem: Problem, theta: np.ndarray) -> list[FlightEnvelope
 
 
 # ------------------------------------------------------------------------------------------- information
-def coefficient_information(problem: Problem, J: np.ndarray) -> np.ndarray:
+def coefficient_information(problem: Problem, J: ArrowJacobian) -> np.ndarray:
     """F_c|i: the data's information on the coefficients (+ extra-term parameters) with the initial
-    conditions marginalised (their weak priors regularise the nuisance block). J: whitened Jacobian of
-    :func:`~bayes_disc.inference.leastsq.whitened_jacobian` (data rows then one prior row per parameter)."""
-    n_data = J.shape[0] - problem.dim
-    Jd = J[:n_data]
-    F = Jd.T @ Jd
-    c = np.arange(problem.ic_start)
-    i = np.arange(problem.ic_start, problem.dim)
-    Fii = F[np.ix_(i, i)] + np.diag(1.0 / problem.prior_sd[i] ** 2)
-    return F[np.ix_(c, c)] - F[np.ix_(c, i)] @ np.linalg.solve(Fii, F[np.ix_(i, c)])
+    conditions marginalised (their weak priors regularise the nuisance block).
+
+    Parameters
+    ----------
+    problem : Problem
+    J : ArrowJacobian
+        Whitened Jacobian over every parameter (:func:`~bayes_disc.inference.leastsq.jacobian_blocks`).
+
+    Returns
+    -------
+    (ic_start, ic_start) array
+        The Schur complement of the information's arrow (:meth:`ArrowMatrix.schur`), less the shared
+        parameters' own prior precision.
+    """
+    if J.n != problem.dim or J.shared.size != problem.ic_start:
+        raise ValueError("coefficient_information needs the Jacobian over every parameter")
+    return J.information().schur() - np.diag(J.prior[J.shared] ** 2)
 
 
 def weak_directions(info: np.ndarray, scale: np.ndarray, cov: np.ndarray, names, n: int = 3) -> list[dict]:
@@ -289,7 +298,7 @@ def throw_information(problem: Problem, theta: np.ndarray, launch: LaunchSpec, s
     if not tr.ok[0] or np.any(tr.states[0, :, 2] < 0.0):
         return None
     sub = one_flight(tr.markers[0])   # observed = predicted: the information does not depend on the values
-    J = whitened_jacobian(x, sub, np.array([sigma]))
+    J = jacobian_blocks(x, sub, np.array([sigma]))
     F = np.zeros((problem.ic_start, problem.ic_start))
     F[:n_shared, :n_shared] = coefficient_information(sub, J)
     return F

@@ -62,7 +62,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..physics.parallel import mp_context
-from ..inference.leastsq import LeastSquaresResult, refine_least_squares, whitened_jacobian, whitened_residuals
+from ..inference.leastsq import LeastSquaresResult, minimise, refine_least_squares, whitened_residuals
 from ..inference.model import Problem
 from ..observation.models.markers import MarkerPositions
 from ..observation.registry import DATA_EXPLANATION, MODEL_EXTENSIONS, unit
@@ -318,8 +318,7 @@ def _fit_task(task):
     problem, starts, sigma, max_nfev = task
     best = None
     for x0 in starts:
-        res = least_squares(whitened_residuals, x0, jac=whitened_jacobian, args=(problem, sigma), method="trf",
-                            x_scale=problem.prior_sd, max_nfev=min(SCOUT_NFEV, max_nfev), xtol=1e-10, ftol=1e-10)
+        res = minimise(problem, x0, sigma, max_nfev=min(SCOUT_NFEV, max_nfev))
         if best is None or res.cost < best.cost:
             best = res
     return refine_least_squares(problem, best.x, max_nfev=max_nfev)

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..inference.config import RunConfig
 from ..inference.data import build_problem
-from ..inference.leastsq import fit_least_squares, whitened_jacobian
+from ..inference.leastsq import fit_least_squares, jacobian_blocks
 from ..inference.profile import profile_paths
 from ..inference.run import RESULT
 from ..observation.models import MarkerPositions
@@ -104,7 +104,7 @@ def run_identifiability(cfg: RunConfig, profiles: bool = False, design: bool = T
                 "alpha_histogram": {"edges_deg": edges.tolist(), "counts": counts.tolist()}}
     envelope["set"] = {k: [float(a), float(b)] for k, (a, b) in envelope["set"].items()}
     # Fisher information with the initial conditions as nuisance
-    J = whitened_jacobian(ls.theta, problem, ls.sigma)
+    J = jacobian_blocks(ls.theta, problem, ls.sigma)
     info = coefficient_information(problem, J)
     prior_sd = problem.prior_sd[:nc]
     Fs = info * np.outer(prior_sd, prior_sd)

@@ -13,6 +13,7 @@ sampler:                 # emcee settings
   rhat: 1.01             # ... R-hat across ensembles is below this ...
   ess: 400               # ... and every coefficient's bulk ESS reaches this
   independence_fraction: 0.3   # share of the independence (ridge-aware) and pCN moves (rest: DE moves)
+  block_fraction: 0.3    # share of the flight-block moves (Gibbs sweeps over flights, shared shifts)
   adapt_steps: 150       # warm-up: the pCN reference is re-fitted after 150 and 300 steps
   seed: 1
   processes: 2           # ensembles run in parallel processes
@@ -59,6 +60,7 @@ class SamplerSettings:
     rhat: float = 1.01
     ess: float = 400.0
     independence_fraction: float = 0.3
+    block_fraction: float = 0.3
     adapt_steps: int = 150
     seed: int = 1
     processes: int = 2
@@ -266,6 +268,7 @@ def config_from_mapping(data: dict, path, output_override=None) -> RunConfig:
         rhat=s.number("rhat", 1.01, minimum=1.0),
         ess=s.number("ess", 400.0, positive=True),
         independence_fraction=s.number("independence_fraction", 0.3, minimum=0.0, maximum=1.0),
+        block_fraction=s.number("block_fraction", 0.3, minimum=0.0, maximum=1.0),
         adapt_steps=s.number("adapt_steps", 150, integer=True, minimum=10),
         seed=s.number("seed", 1, integer=True, nonnegative=True),
         processes=s.number("processes", 2, integer=True, minimum=1),

@@ -1,13 +1,18 @@
 """Joint least squares over all flights (the MAP with the noise scales held fixed): several starts,
-best kept, then Gauss–Newton (Cramér–Rao) covariance and condition number. Seeds the sampler."""
+best kept, then Gauss–Newton (Cramér–Rao) covariance and condition number. Seeds the sampler.
+
+The minimiser (:func:`minimise`) is Levenberg–Marquardt on the block-arrow normal equations
+(:mod:`.arrow`): each flight's initial conditions are eliminated by a Schur complement, so a step costs
+time and memory linear in the number of flights. The dense forms (:func:`whitened_jacobian`,
+:func:`covariance_from_jacobian`) remain for small problems (one flight, a learned correction's design)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..physics import literature_coefficients
+from .arrow import ArrowJacobian
 from .fit_checks import check_fit_plausible
 from .model import Problem
 
@@ -42,42 +47,183 @@ def _steps(problem: Problem, x: np.ndarray) -> np.ndarray:
     return 1e-4 * problem.prior_sd
 
 
+def flight_residuals(x: np.ndarray, problem: Problem, sigma: np.ndarray) -> list[np.ndarray]:
+    """Every flight's whitened effective residuals (n_k,) at x (FAILED_RESIDUAL where its simulation failed)."""
+    parts = []
+    for k in range(problem.n_flights):
+        r, ok = problem.noise_residuals(x[None], k)
+        r = r[0] / sigma[problem.residual_groups(k)]
+        parts.append(r if ok[0] and np.all(np.isfinite(r)) else np.full(r.shape, FAILED_RESIDUAL))
+    return parts
+
+
 def whitened_residuals(x: np.ndarray, problem: Problem, sigma: np.ndarray) -> np.ndarray:
     """Every flight's effective residuals (:meth:`Problem.noise_residuals`) divided by their group's σ, then
     the prior's standardised deviations: ½ |·|² is the negative log-posterior with σ fixed."""
-    parts = []
-    theta = x[None]
-    for k in range(problem.n_flights):
-        r, ok = problem.noise_residuals(theta, k)
-        r = r[0] / sigma[problem.residual_groups(k)]
-        if not ok[0] or not np.all(np.isfinite(r)):
-            r = np.full(r.shape, FAILED_RESIDUAL)
-        parts.append(r)
-    parts.append((x - problem.prior_mean) / problem.prior_sd)
-    return np.concatenate(parts)
+    return np.concatenate(flight_residuals(x, problem, sigma) + [(x - problem.prior_mean) / problem.prior_sd])
 
 
-def whitened_jacobian(x: np.ndarray, problem: Problem, sigma: np.ndarray, free: np.ndarray | None = None) -> np.ndarray:
-    """Central differences, one batched simulation per flight (2 lanes per parameter it depends on); with
-    ``free`` (dim,) bool, the columns of held parameters are zero (not computed)."""
+def jacobian_blocks(x: np.ndarray, problem: Problem, sigma: np.ndarray, free: np.ndarray | None = None) -> ArrowJacobian:
+    """The whitened Jacobian in block-arrow form (:mod:`.arrow`) over the ``free`` parameters (default:
+    all): central differences, one batched simulation per flight (2 lanes per free parameter it depends on).
+
+    Parameters
+    ----------
+    x : (dim,) array
+        Where.
+    problem : Problem
+    sigma : (n_groups,) array
+        Noise scale per group.
+    free : (dim,) bool array, optional
+        Parameters that are unknowns; the unknowns are numbered in θ order among the free ones.
+
+    Returns
+    -------
+    ArrowJacobian
+        Shared unknowns: the free entries before the first flight's; block k: flight k's free entries.
+    """
+    free = np.ones(x.size, bool) if free is None else np.asarray(free, bool)
+    position = np.cumsum(free) - 1                  # θ index -> unknown index
     h = _steps(problem, x)
-    rows = []
-    n_x = x.size
+    shared_cols = np.flatnonzero(free[: problem.ic_start])
+    own, blocks = [], []
     for k in range(problem.n_flights):
-        cols = problem.flight_columns(k)
-        if free is not None:
-            cols = cols[free[cols]]
+        s = problem.layout.flight_slice(k)
+        own_cols = s.start + np.flatnonzero(free[s])
+        cols = np.r_[shared_cols, own_cols]
         lanes = np.repeat(x[None], 2 * cols.size, axis=0)
         lanes[np.arange(cols.size), cols] += h[cols]
         lanes[cols.size + np.arange(cols.size), cols] -= h[cols]
         r, ok = problem.noise_residuals(lanes, k)
         d = (r[: cols.size] - r[cols.size:]) / (2 * h[cols])[:, None] / sigma[problem.residual_groups(k)]
         d[~(ok[: cols.size] & ok[cols.size:])] = 0.0
-        J = np.zeros((r.shape[1], n_x))
-        J[:, cols] = d.T
-        rows.append(J)
-    rows.append(np.diag(1.0 / problem.prior_sd))
-    return np.vstack(rows)
+        blocks.append(np.ascontiguousarray(d.T))
+        own.append(position[own_cols])
+    return ArrowJacobian(shared=position[shared_cols], own=tuple(own), blocks=tuple(blocks),
+                         prior=1.0 / problem.prior_sd[free])
+
+
+def whitened_jacobian(x: np.ndarray, problem: Problem, sigma: np.ndarray, free: np.ndarray | None = None) -> np.ndarray:
+    """The dense whitened Jacobian (data rows, then one prior row per parameter), for small problems:
+    :func:`jacobian_blocks` scattered into a matrix; with ``free`` (dim,) bool, the columns of held
+    parameters are zero (not computed)."""
+    free_mask = np.ones(x.size, bool) if free is None else np.asarray(free, bool)
+    Jf = jacobian_blocks(x, problem, sigma, free_mask).dense()
+    J = np.zeros((Jf.shape[0] - int(free_mask.sum()) + x.size, x.size))
+    n_data = Jf.shape[0] - int(free_mask.sum())
+    J[:n_data, free_mask] = Jf[:n_data]
+    J[n_data:] = np.diag(1.0 / problem.prior_sd)
+    return J
+
+
+@dataclass
+class Minimum:
+    """A Levenberg–Marquardt optimum of the whitened objective (:func:`minimise`)."""
+
+    x: np.ndarray            # (dim,) optimum (held entries as given)
+    cost: float              # ½ Σ whitened residual² (prior included)
+    nfev: int                # residual evaluations
+    njev: int                # Jacobian evaluations
+    status: int              # > 0 converged (1 gradient, 2 step, 3 cost), 0 budget spent, −1 no descent possible
+    message: str
+
+
+#: Levenberg–Marquardt's stopping rule on the gradient: max |g_i · sd_i| (scale-free)
+GTOL = 1e-10
+
+
+def minimise(problem: Problem, x0: np.ndarray, sigma: np.ndarray, free: np.ndarray | None = None,
+             max_nfev: int = 200, xtol: float = 1e-10, ftol: float = 1e-10) -> Minimum:
+    """Levenberg–Marquardt on ½ |whitened residuals|² with the block-arrow normal equations (:mod:`.arrow`):
+    every step costs one Jacobian (one batched simulation per flight) and a Schur solve, both linear in the
+    number of flights.
+
+    Damping: (H + μ diag H) δ = −g, μ updated by Nielsen's rule (× max(1/3, 1 − (2ρ − 1)³) after a step
+    with gain ratio ρ > 0; × ν, ν doubling, after a rejected one). Stops when the step is below
+    ``xtol`` (relative, in prior-sd units), when an accepted step lowers the cost by less than ``ftol``
+    of it (with ρ > 1/4), when the scale-free gradient is below :data:`GTOL`, or after ``max_nfev``
+    residual evaluations.
+
+    Parameters
+    ----------
+    problem : Problem
+    x0 : (dim,) array
+        Start.
+    sigma : (n_groups,) array
+        Noise scale per group, held fixed.
+    free : (dim,) bool array, optional
+        Parameters optimised (default: all); the others stay at their ``x0`` values.
+    max_nfev : int
+        Budget of residual evaluations.
+    xtol, ftol : float
+        Tolerances on the step and on the cost's decrease.
+
+    Returns
+    -------
+    Minimum
+    """
+    free = np.ones(x0.size, bool) if free is None else np.asarray(free, bool)
+    x = np.asarray(x0, float).copy()
+    sd = problem.prior_sd[free]
+
+    def evaluate(z):
+        parts = flight_residuals(z, problem, sigma)
+        prior = (z - problem.prior_mean) / problem.prior_sd
+        return parts, prior, 0.5 * float(sum(p @ p for p in parts) + prior @ prior)
+
+    parts, prior, cost = evaluate(x)
+    nfev, njev, mu, nu = 1, 0, 1e-3, 2.0
+    status, message = 0, "evaluation budget spent"
+    J = None
+    while True:
+        if J is None:
+            J = jacobian_blocks(x, problem, sigma, free)
+            njev += 1
+            H = J.information()
+            g = J.gradient(parts, prior[free])
+            if np.max(np.abs(g * sd), initial=0.0) < GTOL:
+                status, message = 1, "gradient below tolerance"
+                break
+        if nfev >= max_nfev:
+            break
+        try:
+            step = H.solve(-g, mu)
+        except np.linalg.LinAlgError:
+            mu, nu = mu * nu, nu * 2
+            if mu > 1e16:
+                status, message = -1, "no positive-definite damped system"
+                break
+            continue
+        if np.linalg.norm(step / sd) <= xtol * (np.linalg.norm(x[free] / sd) + xtol):
+            status, message = 2, "step below tolerance"
+            break
+        trial = x.copy()
+        trial[free] += step
+        t_parts, t_prior, t_cost = evaluate(trial)
+        nfev += 1
+        predicted = 0.5 * float(-g @ step + mu * step @ (H.diagonal() * step))
+        rho = (cost - t_cost) / predicted if predicted > 0 else -1.0
+        if np.isfinite(t_cost) and rho > 0:
+            small = cost - t_cost <= ftol * cost and rho > 0.25
+            x, parts, prior, cost = trial, t_parts, t_prior, t_cost
+            mu, nu, J = mu * max(1 / 3, 1 - (2 * rho - 1) ** 3), 2.0, None
+            if small:
+                status, message = 3, "cost decrease below tolerance"
+                break
+        else:
+            mu, nu = mu * nu, nu * 2
+            if mu > 1e16:
+                status, message = -1, "no step lowers the cost"
+                break
+    return Minimum(x=x, cost=cost, nfev=nfev, njev=njev, status=status, message=message)
+
+
+def covariance_at(J: ArrowJacobian, free: np.ndarray) -> np.ndarray:
+    """(dim, dim) Gauss–Newton covariance (JᵀJ)⁻¹ from a block Jacobian over the ``free`` parameters (held
+    parameters' rows and columns zero)."""
+    cov = np.zeros((free.size, free.size))
+    cov[np.ix_(free, free)] = J.information().inverse()
+    return cov
 
 
 def _starts(problem: Problem, n: int, rng: np.random.Generator) -> list[np.ndarray]:
@@ -127,8 +273,7 @@ def fit_least_squares(problem: Problem, starts: int = 4, max_nfev: int = 200, se
     results = []
     x0s = _starts(problem, starts, rng)
     for i, x0 in enumerate(x0s):
-        res = least_squares(whitened_residuals, x0, jac=whitened_jacobian, args=(problem, sigma), method="trf",
-                            x_scale=problem.prior_sd, max_nfev=max_nfev, xtol=1e-10, ftol=1e-10)
+        res = minimise(problem, x0, sigma, max_nfev=max_nfev)
         results.append(res)
         if progress is not None:
             progress(i + 1, len(x0s), float(res.cost))
@@ -166,25 +311,15 @@ def refine_least_squares(problem: Problem, x0: np.ndarray, max_nfev: int = 200, 
     """
     x, nfev, res = np.asarray(x0, float).copy(), 0, None
     free = np.ones(x.size, bool) if free is None else np.asarray(free, bool)
-
-    def full(xf):
-        out = x.copy()
-        out[free] = xf
-        return out
-
     for _ in range(rounds):
-        sigma = _rms(problem, x)
-        res = least_squares(lambda xf, s=sigma: whitened_residuals(full(xf), problem, s), x[free],
-                            jac=lambda xf, s=sigma: whitened_jacobian(full(xf), problem, s, free)[:, free],
-                            method="trf", x_scale=problem.prior_sd[free], max_nfev=max_nfev, xtol=1e-12, ftol=1e-12)
-        x, nfev = full(res.x), nfev + res.nfev
+        res = minimise(problem, x, _rms(problem, x), free=free, max_nfev=max_nfev, xtol=1e-12, ftol=1e-12)
+        x, nfev = res.x, nfev + res.nfev
     sigma = _rms(problem, x)
-    J = whitened_jacobian(x, problem, sigma, free)[:, free]
-    cov = np.zeros((x.size, x.size))
-    cov[np.ix_(free, free)] = covariance_from_jacobian(J)
+    J = jacobian_blocks(x, problem, sigma, free)
+    cov = covariance_at(J, free)
     cost = float(0.5 * np.sum(whitened_residuals(x, problem, sigma) ** 2))
-    return LeastSquaresResult(theta=x, sigma=sigma, cov=cov, cost=cost, condition_number=condition_number(J),
-                              start_costs=[], nfev=int(nfev), message=str(res.message) if res else "",
+    return LeastSquaresResult(theta=x, sigma=sigma, cov=cov, cost=cost, condition_number=J.information().condition_number(),
+                              start_costs=[], nfev=int(nfev), message=res.message if res else "",
                               names=problem.names, flight_names=[f.name for f in problem.flights])
 
 

@@ -377,25 +377,36 @@ class Problem:
         cols = self._columns[k][j]
         return theta[:, cols] if cols.size else None
 
+    def flight_sum_squares(self, theta: np.ndarray, k: int) -> np.ndarray:
+        """S̃_g (B, n_groups_k) of flight k's noise groups (:meth:`flight_groups`): one batched simulation of
+        that flight alone; inf where a lane failed."""
+        theta = np.atleast_2d(theta)
+        base = self._groups[k][0].start
+        out = np.empty((theta.shape[0], self.flight_groups(k).size))
+        preds, ok = self.channel_predictions(theta, k)
+        for j, ((c, p), g) in enumerate(zip(preds, self._groups[k])):
+            ss = c.sum_squares(c.effective_residuals(c.residuals(p), self._extra(theta, k, j)))
+            out[:, g.start - base: g.stop - base] = np.where(ok[:, None] & np.isfinite(ss), ss, np.inf)
+        return out
+
+    def flight_log_likelihood(self, ss: np.ndarray, k: int) -> np.ndarray:
+        """(B,) log p(y_k | θ) of flight k alone from its S̃_g (B, n_groups_k), every noise scale integrated
+        out: the likelihood factorises over flights (each flight's noise groups are its own)."""
+        base = self._groups[k][0].start
+        return sum(c.log_likelihood(ss[:, g.start - base: g.stop - base]) for c, g in zip(self.channels[k], self._groups[k]))
+
     def sum_squares(self, theta: np.ndarray) -> np.ndarray:
         """S̃_g (B, n_groups): effective summed squared residuals per noise group (the plain sums of squares
         for independent noise of one size); inf where a lane failed."""
         theta = np.atleast_2d(theta)
         out = np.empty((theta.shape[0], self.n_groups))
         for k in range(self.n_flights):
-            preds, ok = self.channel_predictions(theta, k)
-            for j, ((c, p), g) in enumerate(zip(preds, self._groups[k])):
-                ss = c.sum_squares(c.effective_residuals(c.residuals(p), self._extra(theta, k, j)))
-                out[:, g] = np.where(ok[:, None] & np.isfinite(ss), ss, np.inf)
+            out[:, self.flight_groups(k)] = self.flight_sum_squares(theta, k)
         return out
 
     def log_likelihood_from_ss(self, ss: np.ndarray) -> np.ndarray:
         """Σ over flights and channels of log p(y | θ), every noise scale integrated out."""
-        total = 0.0
-        for ch, per in zip(self.channels, self._groups):
-            for c, g in zip(ch, per):
-                total = total + c.log_likelihood(ss[:, g])
-        return total
+        return sum(self.flight_log_likelihood(ss[:, self.flight_groups(k)], k) for k in range(self.n_flights))
 
     def log_likelihood(self, theta: np.ndarray) -> np.ndarray:
         return self.log_likelihood_from_ss(self.sum_squares(theta))

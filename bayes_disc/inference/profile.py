@@ -1,8 +1,8 @@
 """Profile-likelihood paths of single parameters through the least-squares optimum.
 
 For a parameter θ_i held at values stepping away from the optimum θ̂, every other parameter is
-re-optimised (the same whitened least-squares objective as :mod:`.leastsq`, noise scales fixed at their
-least-squares values):
+re-optimised (the same whitened least-squares objective and block-arrow Levenberg–Marquardt as
+:mod:`.leastsq`, noise scales fixed at their least-squares values):
 
     θ*(v) = argmin_{θ: θ_i = v} ½ Σ_f |r_f(θ)/σ_f|² + ½ |(θ − μ_prior)/sd_prior|²,
     deviance D(v) = 2 [cost(θ*(v)) − cost(θ̂)]        (χ²₁-like; D = t² for a Gaussian posterior)
@@ -18,19 +18,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..physics.parallel import mp_context
-from .leastsq import whitened_jacobian, whitened_residuals, covariance_from_jacobian
+from .leastsq import jacobian_blocks, minimise, whitened_residuals
 from .model import Problem
 
 #: the path stops past this profile deviance (≈ 3.5 σ for a Gaussian)
 MAX_DEVIANCE = 12.0
 #: at most this many points on each side of the optimum
 MAX_POINTS = 6
-#: scipy least-squares method of the constrained fits: MINPACK's Levenberg–Marquardt (same paths as
-#: "trf" on the demo, 2.5× faster: no SVD per iteration)
-PROFILE_METHOD = "lm"
 #: a point whose deviance exceeds this multiple of the stopping deviance is a failed fit or a cliff: it
 #: still bounds the profile but is not ``ok`` (not used as a posterior approximation)
 FAILED_DEVIANCE_FACTOR = 4.0
@@ -99,20 +95,13 @@ class ProfilePath:
 
 
 def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, index: int, value: float, max_nfev: int):
-    """Optimum of every parameter but ``index`` (held at ``value``), from x0."""
-    free = np.r_[0:index, index + 1:x0.size]
-
-    def embed(z):
-        x = x0.copy()
-        x[free] = z
-        x[index] = value
-        return x
-
-    res = least_squares(lambda z: whitened_residuals(embed(z), problem, sigma), x0[free],
-                        jac=lambda z: whitened_jacobian(embed(z), problem, sigma)[:, free],
-                        method=PROFILE_METHOD, x_scale=problem.prior_sd[free], max_nfev=max_nfev, xtol=1e-10,
-                        ftol=1e-10)
-    return embed(res.x), float(res.cost), bool(res.status > 0)
+    """Optimum of every parameter but ``index`` (held at ``value``), from x0: (θ*, cost, converged)."""
+    free = np.ones(x0.size, bool)
+    free[index] = False
+    x = x0.copy()
+    x[index] = value
+    res = minimise(problem, x, sigma, free=free, max_nfev=max_nfev)
+    return res.x, float(res.cost), bool(res.status > 0)
 
 
 def profile_path(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov_hat: np.ndarray, index: int,
@@ -134,7 +123,7 @@ def profile_path(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
             x_new, cost, ok = _fixed_fit(problem, sigma, x, index, value, max_nfev)
             if not (ok and np.isfinite(cost)):
                 break
-            cov = covariance_from_jacobian(whitened_jacobian(x_new, problem, sigma))
+            cov = jacobian_blocks(x_new, problem, sigma).information().inverse()
             dev = 2.0 * (cost - cost0)
             points.append(ProfilePoint(value=value, theta=x_new, deviance=dev, cov=cov,
                                        t=(value - theta_hat[index]) / sd0,

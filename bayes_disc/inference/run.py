@@ -148,7 +148,7 @@ def run_key(cfg: RunConfig, problem) -> dict:
     """
     flights = {name: {k: v for k, v in f.items() if k != "file"} for name, f in flight_info(problem).items()}
     settings = {k: v for k, v in asdict(cfg.sampler).items() if k not in RESUMABLE_SETTINGS}
-    settings["walkers"] = n_walkers(cfg.sampler, problem.dim)
+    settings["walkers"] = n_walkers(cfg.sampler, problem)
     prior = cfg.prior if isinstance(cfg.prior, str) else prior_record(cfg.prior)
     key = {"parameters": list(problem.names), "flights": flights, "markers": cfg.markers, "prior": prior,
            "sampler": settings}
@@ -407,7 +407,7 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
         (out / "chains").mkdir(exist_ok=True)
         (out / "chains" / RUN_KEY).write_text(json.dumps(run_key(cfg, problem), indent=1))
     s = cfg.sampler
-    with stage("sampling", f"{s.ensembles} ensembles × {n_walkers(s, problem.dim)} walkers until R-hat < {s.rhat:g}, "
+    with stage("sampling", f"{s.ensembles} ensembles × {n_walkers(s, problem)} walkers until R-hat < {s.rhat:g}, "
                            f"ESS ≥ {s.ess:g}, N/τ ≥ {s.n_tau:g} (cap {s.max_steps} steps)") as st:
         chains = run_sampler(problem, proposal, cfg.sampler, out, resume=steps is not None, progress=progress)
         st.result = f"{chains.reason} at step {chains.total_steps}"

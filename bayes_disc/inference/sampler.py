@@ -8,6 +8,11 @@
   a failure to mix.
 * Moves: Metropolis–Hastings moves with exact acceptance ratios (each leaves the posterior invariant),
   mixed with emcee's differential-evolution moves:
+  - block moves (:mod:`.moves`, a ``block_fraction`` share): Metropolis-within-Gibbs sweeps over the
+    flights' own blocks (one flight's simulation per proposal) and shared random-walk steps that carry
+    every flight along its regression on the shared parameters; with them on, the ensembles need only
+    2·(s + p_max) + 2 walkers (s shared parameters, p_max the largest flight block) instead of 2·dim + 2,
+    so a step's cost grows with the flights only through their simulations;
   - independence jumps from :func:`.proposals.independence_proposal`: the Laplace approximation plus a
     ridge proposal along every profile-likelihood path (:mod:`.profile`) that departs from it. A weakly
     identified combination (the demo's CM0 and CMq with the flights' wobble initial conditions) makes
@@ -40,6 +45,7 @@ import numpy as np
 from ..physics.parallel import mp_context
 from .config import SamplerSettings
 from .model import Problem
+from .moves import FlightBlockMove, SharedShift, block_factors
 from .proposals import CompositeProposal, Proposal
 
 logger = logging.getLogger(__name__)
@@ -57,23 +63,65 @@ DE_SCALE = 0.35
 DE_MIX = ((DE_SCALE, 0.7), (1.0, 0.15), ("snooker", 0.15))
 
 
-def _moves(proposal: Proposal, independence: CompositeProposal, fraction: float, dim: int):
+#: Within the block share: Metropolis-within-Gibbs sweeps over the flights' own blocks, and shared shifts
+#: that carry the flights along (:mod:`.moves`).
+BLOCK_MIX = (("gibbs", 0.6), ("shift", 0.4))
+
+
+def _moves(problem: Problem, proposal: Proposal, independence: CompositeProposal, fraction: float,
+           block_fraction: float = 0.0, walkers: int | None = None):
+    """emcee's (move, weight) list: a ``block_fraction`` share of block moves, then of the rest a
+    ``fraction`` share of Metropolis–Hastings moves (independence jumps, pCN) and DE moves. With fewer than
+    2·dim ``walkers`` (block moves on), the DE moves propose within the walkers' span only: still exact,
+    so emcee's guard against them is lifted (``live_dangerously``)."""
+    dangerous = walkers is not None and walkers < 2 * problem.dim
     moves = []
+    if block_fraction > 0:
+        conditional, shared, regression = block_factors(problem, proposal.chol @ proposal.chol.T)
+        for kind, share in BLOCK_MIX:
+            move = (FlightBlockMove(problem, conditional) if kind == "gibbs"
+                    else emcee.moves.MHMove(SharedShift(shared, regression)))
+            moves.append((move, block_fraction * share))
+    rest = 1.0 - block_fraction
     if fraction > 0:
         for rho, share in MH_MIX:
             move = independence if rho is None else proposal.with_rho(rho)
-            moves.append((emcee.moves.MHMove(move), fraction * share))
+            moves.append((emcee.moves.MHMove(move), rest * fraction * share))
     if fraction < 1:
-        g0 = 2.38 / np.sqrt(2 * dim)
+        g0 = 2.38 / np.sqrt(2 * problem.dim)
         for kind, share in DE_MIX:
-            move = emcee.moves.DESnookerMove() if kind == "snooker" else emcee.moves.DEMove(gamma0=kind * g0)
-            moves.append((move, (1 - fraction) * share))
+            move = (emcee.moves.DESnookerMove(live_dangerously=dangerous) if kind == "snooker"
+                    else emcee.moves.DEMove(gamma0=kind * g0, live_dangerously=dangerous))
+            moves.append((move, rest * (1 - fraction) * share))
     return moves
 
 
-def n_walkers(settings: SamplerSettings, dim: int) -> int:
-    w = settings.walkers or 2 * dim + 2
-    return max(w + (w % 2), 2 * dim + 2)
+def n_walkers(settings: SamplerSettings, problem: Problem) -> int:
+    """Walkers per ensemble: ``settings.walkers`` (made even), at least the minimum, which is also the
+    default (``walkers: 0``).
+
+    The minimum is 2·dim + 2 when the ensemble's own moves (DE) must span the whole space; with the block
+    moves on (``block_fraction`` > 0: every flight's block and the shared block have full-rank moves of
+    their own) it is 2·(s + p_max) + 2, s the shared parameters and p_max the largest flight block, so
+    that the cost of a step grows with the flights only through their simulations.
+
+    Parameters
+    ----------
+    settings : SamplerSettings
+    problem : Problem
+
+    Returns
+    -------
+    int
+    """
+    if settings.block_fraction > 0:
+        block = max(problem.layout.flight_slice(k).stop - problem.layout.flight_slice(k).start
+                    for k in range(problem.n_flights))
+        least = 2 * (problem.ic_start + block) + 2
+    else:
+        least = 2 * problem.dim + 2
+    w = settings.walkers or least
+    return max(w + (w % 2), least)
 
 
 def initial_walkers(start: CompositeProposal, n: int, problem: Problem, rng: np.random.Generator) -> np.ndarray:
@@ -97,8 +145,9 @@ def initial_walkers(start: CompositeProposal, n: int, problem: Problem, rng: np.
 _WORKER: dict = {}
 
 
-def _init_worker(problem, proposal, independence, fraction):
-    _WORKER.update(problem=problem, proposal=proposal, independence=independence, fraction=fraction)
+def _init_worker(problem, proposal, independence, fraction, block_fraction=0.0):
+    _WORKER.update(problem=problem, proposal=proposal, independence=independence, fraction=fraction,
+                   block_fraction=block_fraction)
 
 
 class _InProcessPool:
@@ -134,13 +183,17 @@ def _advance(task) -> int:
     backend = emcee.backends.HDFBackend(str(path))
     nw = start.shape[0] if start is not None else backend.shape[0]
     sampler = emcee.EnsembleSampler(nw, problem.dim, problem.log_prob_blobs, vectorize=True, backend=backend,
-                                    moves=_moves(proposal, independence, _WORKER["fraction"], problem.dim),
+                                    moves=_moves(problem, proposal, independence, _WORKER["fraction"],
+                                                 _WORKER["block_fraction"], nw),
                                     blobs_dtype=float)
+    # fewer walkers than parameters (block moves on): they cannot be linearly independent, which emcee's
+    # start check demands; the block moves, not the ensemble's span, make the chain move in every direction
+    skip = nw <= problem.dim
     if start is not None:
         sampler.random_state = np.random.RandomState(seed).get_state()
-        sampler.run_mcmc(start, n_steps, progress=False)
+        sampler.run_mcmc(start, n_steps, progress=False, skip_initial_state_check=skip)
     else:
-        sampler.run_mcmc(None, n_steps, progress=False)
+        sampler.run_mcmc(None, n_steps, progress=False, skip_initial_state_check=skip)
     return backend.iteration
 
 
@@ -429,7 +482,7 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
     chain_dir.mkdir(parents=True, exist_ok=True)
     paths = chain_paths(out_dir, settings.ensembles)
     prop_path, ind_path, hist_path = chain_dir / "proposal.npz", chain_dir / "independence.npz", chain_dir / "history.json"
-    nw = n_walkers(settings, problem.dim)
+    nw = n_walkers(settings, problem)
     steps = saved_steps(out_dir, settings.ensembles) if resume else None
     history: list = []
     if steps is not None:
@@ -472,7 +525,8 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
     finished = False
     try:
         while not finished:
-            with _pool(settings, (problem, proposal, independence, settings.independence_fraction)) as pool:
+            with _pool(settings, (problem, proposal, independence, settings.independence_fraction,
+                                  settings.block_fraction)) as pool:
                 if min(steps) < done:   # resumed with unequal ensembles: bring the shorter ones level first
                     tasks = [(p, done - k, s, settings.seed * 1000 + e)
                              for e, (p, s, k) in enumerate(zip(paths, starts, steps)) if k < done]
