@@ -130,8 +130,10 @@ FLIGHTS = [
     dict(name="g2", speed=14.0, launch_angle_deg=0, alpha_deg=2, roll_deg=-4, spin=65, duration=DURATION,
          position=[0, 0, 0.45]),
 ]
-#: the candidates tried: the ground effect and the wind that competes with it (not the side force)
-TRIED = ["ground_effect", "wind"]
+#: the candidates tried: the ground effect and the α-dependence that competes with it for lift and drag (not
+#: the side force, nor the wind: a steady sheared wind absorbs this side force on these two flights — RMS
+#: 1.52 and 1.49 mm at 1.5 mm noise, white — so the two are not told apart here)
+TRIED = ["ground_effect", "nonlinear_aero"]
 
 
 def make_two_effect_run(folder, seed=3):
@@ -188,7 +190,7 @@ class _Problem:
     def __init__(self, n_ext):
         self.n_coords = np.array([3000, 3000])
         self.flights = [type("F", (), {"name": n})() for n in ("g1", "g2")]
-        self.n_ext, self.n_groups = n_ext, 2
+        self.n_ext, self.n_groups, self.n_flights = n_ext, 2, 2
 
     def flight_groups(self, k):
         return np.array([k])
@@ -205,10 +207,10 @@ class _Fit:
 def test_statuses_follow_evidence_whiteness_and_share():
     from bayes_disc.diagnostics.missing_physics import best_partial, judge
     floor = np.array([3000.0, 3000.0])                   # σ̂ = 1 per residual
-    base = _Fit([6000.0, 3000.0], [1e-9, 0.5])            # 3000 excess, all in g1
+    base = _Fit([6000.0, 4500.0], [1e-9, 1e-9])           # 4500 excess: 3000 in g1, 1500 in g2
     white, structured = [0.5, 0.5], [1e-9, 0.5]
-    cases = {"explains": ([3050.0, 3000.0], white), "partially_explains": ([3600.0, 3000.0], structured),
-             "insufficient": ([5000.0, 3000.0], structured), "no_evidence": ([5990.0, 3000.0], structured)}
+    cases = {"explains": ([3050.0, 3020.0], white), "partially_explains": ([3600.0, 3300.0], structured),
+             "insufficient": ([5000.0, 4000.0], structured), "no_evidence": ([5990.0, 4495.0], structured)}
     judged = {}
     for want, (ss, p) in cases.items():
         c = judge(base, want, _Fit(ss, p, n_ext=2), floor)
@@ -219,12 +221,15 @@ def test_statuses_follow_evidence_whiteness_and_share():
     assert judged["partially_explains"].share >= SHARE_PARTIAL > judged["insufficient"].share
     # the best partial explanation: the single, or the pair when its partner earns its place over it
     single = judged["partially_explains"]
-    pair_fit = _Fit([3300.0, 3000.0], structured, n_ext=4)
+    pair_fit = _Fit([3300.0, 3150.0], structured, n_ext=4)
     pair = judge(single.fit, "wind", pair_fit, floor, origin=base)
     assert pair.status == "partially_explains" and pair.share == pytest.approx(0.9)      # share of base's excess
     assert [c.id for c in best_partial(single, [pair])] == ["partially_explains", "wind"]
-    weak = judge(single.fit, "wind", _Fit([3595.0, 3000.0], structured, n_ext=4), floor, origin=base)
+    weak = judge(single.fit, "wind", _Fit([3595.0, 3298.0], structured, n_ext=4), floor, origin=base)
     assert weak.status == "no_evidence"
     assert [c.id for c in best_partial(single, [weak])] == ["partially_explains"]
     assert best_partial(judged["insufficient"], []) == []
     assert best_partial(None, []) == []
+    # the same 80 % of an excess that sits in one flight only is not replicated: a gust, not physics
+    one = judge(_Fit([6000.0, 3000.0], [1e-9, 0.5]), "one", _Fit([3600.0, 3000.0], structured, n_ext=2), floor)
+    assert one.share == pytest.approx(0.8) and one.status == "insufficient"

@@ -301,6 +301,7 @@ def learned_record(learned: LearnedDiscrepancy, diag: Diagnosis) -> dict:
            "columns": {n: {"value": float(v), "sd": float(s)} for n, v, s in zip(learned.names, learned.values,
                                                                                    learned.sd)},
            "evidence": learned.delta_bic, "white": learned.white, "share_explained": learned.share,
+           "replicated": learned.replicated, "explains": learned.explains,
            "rms_after_mm": learned.fit.rms_mm,
            "rms_after": learned.fit.rms, "concentration": learned.concentration,
            "direction_share": learned.direction_share, "variable": learned.variable, "direction": direction,
@@ -336,7 +337,9 @@ def learned_words(result: dict) -> str | None:
     text = (f"A correction learned in functions of height, α and spin ({ld['selected']} of them selected, ΔBIC "
             f"{ld['evidence']:,.0f}) {result_text}; its evidence lies in {where}, mostly in {ld['direction']}")
     fam = ld.get("family")
-    explains = ld["white"] or (share is not None and np.isfinite(share) and share >= SHARE_PARTIAL)
+    large = share is not None and np.isfinite(share) and share >= SHARE_PARTIAL
+    # files written before the replication rule have no "explains": there it was white or a large share
+    explains = ld["explains"] if "explains" in ld else (ld["white"] or large)
     if fam:
         text += (f": the missing physics is {'' if ld['white'] else 'mainly '}a function of {ld['variable']}, the "
                  f"{effect_name(fam)} family")
@@ -347,6 +350,9 @@ def learned_words(result: dict) -> str | None:
                                       f"; its {ld['direction']} curve departs from the fitted {effect_name(fam)} "
                                       "form beyond two standard deviations (see the report's curve)")
         text += "."
+    elif large and not explains:
+        text += (": its gain is not replicated in a second flight, so it cannot tell physics from a disturbance "
+                 "of one flight (a gust, say) and names no family.")
     elif not explains:
         text += (": the mismatch is not a smooth function of the flight state the library's terms use "
                  "(a disturbance, or physics outside these variables).")

@@ -34,7 +34,8 @@ import numpy as np
 
 from ..inference.leastsq import covariance_from_jacobian, refine_least_squares, whitened_jacobian, whitened_residuals
 from ..physics.discrepancy import COLUMNS, DISCREPANCY, DIRECTIONS, FUNCTIONS, basis, column_name
-from .missing_physics import SHARE_PARTIAL, ModelFit, excess_share, extend_theta, model_fit, structured
+from .missing_physics import (SHARE_PARTIAL, ModelFit, excess_share, extend_theta, model_fit, replicating_flights,
+                              structured)
 from .residuals import channel_runs
 
 #: least |z| of a kept column
@@ -125,11 +126,14 @@ class LearnedDiscrepancy:
     direction_share: dict
     flown: dict = field(default_factory=dict)
     share: float = float("nan")
+    replicated: bool = False
 
     @property
     def explains(self) -> bool:
-        """White residuals after, or at least ``SHARE_PARTIAL`` of the base model's excess misfit removed."""
-        return self.white or (np.isfinite(self.share) and self.share >= SHARE_PARTIAL)
+        """White residuals after, or at least ``SHARE_PARTIAL`` of the base model's excess misfit removed and
+        that removal :attr:`replicated`: in two flights (:func:`.missing_physics.replicating_flights`), or in
+        one when no other flight flew where the correction matters (:func:`unreached_elsewhere`)."""
+        return self.white or (np.isfinite(self.share) and self.share >= SHARE_PARTIAL and self.replicated)
 
     @property
     def variable(self) -> str | None:
@@ -178,16 +182,49 @@ def _zeroed(x: np.ndarray, columns: np.ndarray, kept: np.ndarray) -> np.ndarray:
     return out
 
 
+def _flown_values(fit: ModelFit) -> list[dict]:
+    """Per flight, {variable: values along its fitted trajectory}: height z [m], α [rad], μ = r d / 2|v_a|."""
+    p, out = fit.problem, []
+    for k in range(p.n_flights):
+        _, tr, _, _, air = channel_runs(p, fit.ls.theta, k)[0]
+        out.append({"height": tr.states[0][:, 2], "alpha": air.alpha[0],
+                    "spin": air.pqr[0, :, 2] * p.disc.diameter / (2 * np.maximum(air.speed[0], 1e-9))})
+    return out
+
+
 def flown_range(fit: ModelFit) -> dict:
     """{variable: (5th percentile, median, 95th percentile)} over every flight's fitted trajectory: height z
     [m], α [rad], advance ratio μ = r d / 2|v_a|."""
-    p, vals = fit.problem, {"height": [], "alpha": [], "spin": []}
-    for k in range(p.n_flights):
-        _, tr, _, _, air = channel_runs(p, fit.ls.theta, k)[0]
-        vals["height"].append(tr.states[0][:, 2])
-        vals["alpha"].append(air.alpha[0])
-        vals["spin"].append(air.pqr[0, :, 2] * p.disc.diameter / (2 * np.maximum(air.speed[0], 1e-9)))
-    return {v: tuple(float(q) for q in np.nanpercentile(np.concatenate(x), [5, 50, 95])) for v, x in vals.items()}
+    per = _flown_values(fit)
+    return {v: tuple(float(q) for q in np.nanpercentile(np.concatenate([f[v] for f in per]), [5, 50, 95]))
+            for v in ("height", "alpha", "spin")}
+
+
+#: a learned correction matters where it exceeds this many sd and this fraction of its largest value
+MATTERS_SD, MATTERS_FRACTION = 3.0, 0.1
+
+
+def unreached_elsewhere(learned: "LearnedDiscrepancy", per_flight: list[dict], removing: list[int]) -> bool:
+    """Whether only the flights in ``removing`` flew where the correction matters (along its strongest
+    variable, in its main direction: |ΔC| > ``MATTERS_SD`` sd and > ``MATTERS_FRACTION`` of its peak): then a
+    gain confined to them is what physics of that state gives, not a sign of a disturbance (a ground effect
+    that only the one low flight reaches)."""
+    variable = max((v for v in learned.concentration if v != "constant"), key=lambda v: learned.concentration[v],
+                   default=None)
+    direction = learned.direction
+    if variable is None or direction is None:
+        return False
+    values = np.concatenate([f[variable] for f in per_flight])
+    grid = np.linspace(np.nanmin(values), np.nanmax(values), 200)
+    value, sd = learned.curve(direction, variable, grid)
+    matters = (np.abs(value) > MATTERS_SD * sd) & (np.abs(value) > MATTERS_FRACTION * np.max(np.abs(value)))
+    for k, f in enumerate(per_flight):
+        if k in removing:
+            continue
+        lo, hi = np.nanmin(f[variable]), np.nanmax(f[variable])
+        if np.any(matters & (grid >= lo) & (grid <= hi)):
+            return False
+    return True
 
 
 def _wald_shares(names: list, values: np.ndarray, cov: np.ndarray, key) -> dict:
@@ -271,6 +308,11 @@ def learn_discrepancy(base: ModelFit, build, max_nfev: int = 200, log=lambda msg
         direction_share=_wald_shares(names, values, cov, lambda d, f: d),
         flown=flown_range(base),
         share=excess_share(base.ss, fit.ss, base.noise_floor, base.problem.n_coords))
+    bp = base.problem
+    removing = replicating_flights(base.ss, fit.ss, base.noise_floor, bp.n_coords,
+                                   [bp.flight_groups(k) for k in range(bp.n_flights)])
+    learned.replicated = (len(removing) >= min(2, bp.n_flights)
+                          or (len(removing) == 1 and unreached_elsewhere(learned, _flown_values(base), removing)))
     log(f"  learned discrepancy: ΔBIC {delta_bic:.1f}, residuals {'white' if learned.white else 'structured'}, "
         f"share of the excess misfit {learned.share:.2f}, "
         + ", ".join(f"{v} {s:.2f}" for v, s in sorted(learned.concentration.items(), key=lambda t: -t[1])))

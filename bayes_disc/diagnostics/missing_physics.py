@@ -33,8 +33,10 @@ undefined (NaN) when E is within noise of zero (E ≤ ``EXCESS_MIN_SD`` standard
 under white noise, σ̂_g² √(2 n_g) per group): there is then no excess to share. A candidate is
 
 * ``explains``: ΔBIC > threshold and every flight's residuals white;
-* ``partially_explains``: ΔBIC > threshold, structure left, share ≥ ``SHARE_PARTIAL``;
-* ``insufficient``: ΔBIC > threshold, structure left, share below it (or undefined);
+* ``partially_explains``: ΔBIC > threshold, structure left, share ≥ ``SHARE_PARTIAL``, and replicated:
+  at least two flights (the only one of a one-flight run) have an excess of their own of which the
+  candidate removes at least half ``SHARE_PARTIAL`` (:func:`replicating_flights`; a gust marks one flight);
+* ``insufficient``: ΔBIC > threshold, structure left, share below it (or undefined, or not replicated);
 * ``no_evidence``: ΔBIC ≤ threshold.
 
 Shares always refer to the base model (a pair's share is that of both terms together). When nothing
@@ -230,6 +232,45 @@ def excess_share(base_ss: np.ndarray, cand_ss: np.ndarray, floor: np.ndarray, n:
     return float(np.clip(np.sum(base_ss[ok] - cand_ss[ok]) / excess, 0.0, 1.0))
 
 
+def replicating_flights(base_ss: np.ndarray, cand_ss: np.ndarray, floor: np.ndarray, n: np.ndarray,
+                        flight_groups: list, min_share: float = 0.5 * SHARE_PARTIAL) -> list[int]:
+    """The flights that have an excess misfit of their own (:func:`excess_share` defined for their groups)
+    of which the candidate removes at least ``min_share``.
+
+    A partial explanation must be replicated: physics acts in every flight that reaches the state it
+    depends on, whereas a disturbance (a gust, a collision) marks one flight, and a term with free
+    parameters bent to one flight's excess can remove most of it (a ground effect takes 77 % of a side gust's).
+
+    Parameters
+    ----------
+    base_ss, cand_ss, floor, n : (n_groups,) arrays
+        As for :func:`excess_share`.
+    flight_groups : list of (k,) int arrays
+        Each flight's noise groups.
+    min_share : float
+        Least share of a flight's own excess the candidate must remove there.
+
+    Returns
+    -------
+    list of int
+        Flight indices.
+    """
+    out = []
+    for k, g in enumerate(flight_groups):
+        share = excess_share(np.asarray(base_ss)[g], np.asarray(cand_ss)[g], np.asarray(floor)[g], np.asarray(n)[g])
+        if np.isfinite(share) and share >= min_share:
+            out.append(k)
+    return out
+
+
+def replicated(base: ModelFit, cand_ss: np.ndarray, floor: np.ndarray) -> bool:
+    """Whether a candidate's removal of excess misfit is replicated (:func:`replicating_flights`) in two
+    flights, or in the only flight of a one-flight run."""
+    p = base.problem
+    groups = [p.flight_groups(k) for k in range(p.n_flights)]
+    return len(replicating_flights(base.ss, cand_ss, floor, p.n_coords, groups)) >= min(2, p.n_flights)
+
+
 @dataclass
 class Candidate:
     """One candidate judged against the model it extends (statuses: module docstring); ``share``: the
@@ -285,7 +326,7 @@ def judge(base: ModelFit, cand_id: str, fit: ModelFit, floor: np.ndarray, thresh
     else:
         if clean.all():
             c.status = "explains"
-        elif np.isfinite(c.share) and c.share >= share_partial:
+        elif np.isfinite(c.share) and c.share >= share_partial and replicated(origin, fit.ss, floor):
             c.status = "partially_explains"
         else:
             c.status = "insufficient"
