@@ -143,3 +143,19 @@ def test_concealed_ground_effect_form_is_learned_as_a_function_of_height(tmp_pat
     flown = grid >= ld["flown"]["height"][0]
     assert np.all(np.abs(value - true)[flown] <= 3 * sd[flown] + 0.03), np.c_[grid, value, sd, true]
     assert "ground effect family" in result["words"]
+
+
+def test_a_gain_in_one_flight_counts_only_where_no_other_flight_flew():
+    """A height correction that matters below ~0.5 m: confined to the one flight that flew there, it is what a
+    ground effect gives (replication not expected); when a second flight flew as low without needing it, a
+    gain in one flight is not physics of that state."""
+    from bayes_disc.diagnostics.discrepancy import LearnedDiscrepancy, unreached_elsewhere
+    ld = LearnedDiscrepancy(fit=None, names=["dc_lift_h02"], values=np.array([0.5]), sd=np.array([0.01]),
+                            cov=np.array([[1e-4]]), delta_bic=100.0, white=False, concentration={"height": 1.0},
+                            direction_share={"lift": 1.0}, flown={"height": (0.3, 1.2, 2.0), "alpha": (0.1, 0.1, 0.1),
+                                                                   "spin": (0.5, 0.5, 0.5)})
+    low = {"height": np.linspace(0.2, 0.8, 50), "alpha": np.full(50, 0.1), "spin": np.full(50, 0.5)}
+    high = {"height": np.linspace(1.0, 2.0, 50), "alpha": np.full(50, 0.1), "spin": np.full(50, 0.5)}
+    also_low = {"height": np.linspace(0.25, 2.0, 50), "alpha": np.full(50, 0.1), "spin": np.full(50, 0.5)}
+    assert unreached_elsewhere(ld, [low, high], removing=[0])
+    assert not unreached_elsewhere(ld, [low, also_low], removing=[0])
