@@ -29,6 +29,7 @@ from emcee.moves.move import Move
 from emcee.state import State
 
 from .model import Problem
+from .proposals import scaled_cholesky
 
 
 def block_factors(problem: Problem, cov: np.ndarray) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
@@ -58,17 +59,11 @@ def block_factors(problem: Problem, cov: np.ndarray) -> tuple[list[np.ndarray], 
     conditional = []
     for k in range(problem.n_flights):
         sl = problem.layout.flight_slice(k)
-        conditional.append(_cholesky(np.linalg.inv(precision[sl, sl])))
+        conditional.append(scaled_cholesky(np.linalg.inv(precision[sl, sl])))
     s = problem.ic_start
     Sss = cov[:s, :s]
     regression = np.linalg.solve(Sss, cov[:s, s:]).T
-    return conditional, _cholesky(Sss), regression
-
-
-def _cholesky(M: np.ndarray) -> np.ndarray:
-    M = 0.5 * (M + M.T)
-    d = np.sqrt(np.diag(M))
-    return np.linalg.cholesky(M / np.outer(d, d) + 1e-12 * np.eye(M.shape[0])) * d[:, None]
+    return conditional, scaled_cholesky(Sss), regression
 
 
 class FlightBlockMove(Move):
