@@ -107,3 +107,22 @@ def test_bad_config_is_one_line_error(tmp_path, capsys):
     assert main(["identifiability", str(tmp_path / "c.yaml")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "missing.csv" in err[0]
+
+
+def test_profiles_of_the_demo_are_bounded_and_gaussian_near_the_optimum(tmp_path):
+    """The profile fits converge inside their budget (a fit stopped by its budget ends its side of the path,
+    and a strict relative tolerance once made CL0 and CD0 of the demo's flights 'one-sided' though their
+    posteriors are narrow); near the optimum of these well-determined coefficients D ≈ t²."""
+    from bayes_disc.inference.config import load_config
+    from bayes_disc.inference.leastsq import fit_least_squares
+    from bayes_disc.inference.profile import profile_path
+    from bayes_disc.inference.run import build_problem
+    cfg = load_config(_demo_data(tmp_path))
+    problem = build_problem(cfg)
+    ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
+                           seed=cfg.sampler.seed)
+    for name in ("CL0", "CD0", "CLa"):
+        path = profile_path(problem, ls.theta, ls.sigma, ls.cov, problem.names.index(name))
+        assert path.classify() == "bounded", (name, path.t, path.deviance)
+        near = np.abs(path.t) <= 2.5
+        assert near.sum() >= 5 and np.allclose(path.deviance[near], path.t[near] ** 2, atol=0.1), (name, path.deviance)

@@ -27,6 +27,9 @@ from .model import Problem
 MAX_DEVIANCE = 12.0
 #: at most this many points on each side of the optimum
 MAX_POINTS = 6
+#: a profile fit stops when a step lowers the deviance by less than this (the deviances are read to ~0.01; the
+#: relative tolerance of a full fit would spend the evaluation budget on digits no verdict uses)
+DEVIANCE_TOL = 1e-3
 #: a point whose deviance exceeds this multiple of the stopping deviance is a failed fit or a cliff: it
 #: still bounds the profile but is not ``ok`` (not used as a posterior approximation)
 FAILED_DEVIANCE_FACTOR = 4.0
@@ -94,13 +97,17 @@ class ProfilePath:
         return "bounded" if up and down else ("one-sided" if up or down else "flat")
 
 
-def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, index: int, value: float, max_nfev: int):
-    """Optimum of every parameter but ``index`` (held at ``value``), from x0: (θ*, cost, converged)."""
+def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, index: int, value: float, max_nfev: int,
+               cost0: float):
+    """Optimum of every parameter but ``index`` (held at ``value``), from x0: (θ*, cost, converged). The fit
+    stops when a step lowers the deviance 2 Δcost by less than :data:`DEVIANCE_TOL` (``cost0``: the
+    optimum's cost, which turns it into the minimiser's relative tolerance)."""
     free = np.ones(x0.size, bool)
     free[index] = False
     x = x0.copy()
     x[index] = value
-    res = minimise(problem, x, sigma, free=free, max_nfev=max_nfev)
+    ftol = 0.5 * DEVIANCE_TOL / max(cost0, 1e-300)
+    res = minimise(problem, x, sigma, free=free, max_nfev=max_nfev, ftol=ftol)
     return res.x, float(res.cost), bool(res.status > 0)
 
 
@@ -120,7 +127,7 @@ def profile_path(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
         x, step = theta_hat.copy(), sd0
         for _ in range(max_points):
             value = float(x[index] + side * step)
-            x_new, cost, ok = _fixed_fit(problem, sigma, x, index, value, max_nfev)
+            x_new, cost, ok = _fixed_fit(problem, sigma, x, index, value, max_nfev, cost0)
             if not (ok and np.isfinite(cost)):
                 break
             cov = jacobian_blocks(x_new, problem, sigma).information().inverse()
