@@ -140,6 +140,34 @@ def test_evidence_charges_for_parameters(tmp_path):
     assert better == pytest.approx(n[0] * np.log(2.0) - k * np.log(n.sum()))
 
 
+def test_reach_is_where_a_term_acts_beyond_the_launch(tmp_path):
+    """A ground effect acts in the low flight c (0.45 m) and not in a and b (about 1 m), beyond what their
+    launch absorbs; a wind acts in every flight."""
+    from bayes_disc.diagnostics.missing_physics import REACH_SD, ModelFit, reach
+    from bayes_disc.inference.leastsq import LeastSquaresResult
+    cfg = load_config(make_run(tmp_path, {}, seed=1))
+
+    def fit_of(problem, theta):
+        ls = LeastSquaresResult(theta=theta, sigma=np.full(problem.n_groups, NOISE_MM * 1e-3), cov=np.eye(theta.size),
+                                cost=0.0, condition_number=1.0, start_costs=[], nfev=0, message="",
+                                names=list(problem.names), flight_names=[])
+        return ModelFit((), problem, ls, np.ones(problem.n_groups))
+    base_p = build_problem(cfg)
+    base = fit_of(base_p, base_p.start_vector())
+    found = {}
+    for term, values in (("ground_effect", {"CL_ge": 0.5, "CD_ge": 0.15}), ("wind", {"wind_x": 1.0, "wind_y": 1.0})):
+        p = build_problem(cfg, terms_override=[term])
+        x = extend_theta(base.ls.theta, base_p, p)
+        for name, v in values.items():
+            x[p.names.index(name)] = v
+        found[term] = reach(fit_of(p, x), base)
+    ge = found["ground_effect"]
+    assert ge[2] > 100 * REACH_SD and max(ge[0], ge[1]) < REACH_SD, ge
+    assert np.all(found["wind"] > 10 * REACH_SD), found["wind"]
+    # switched off, the term does not act anywhere
+    assert np.allclose(reach(base, base), 0.0)
+
+
 # -- end to end ---------------------------------------------------------------------------------------
 
 def test_diagnose_names_a_concealed_side_force(tmp_path, capsys):

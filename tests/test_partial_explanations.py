@@ -231,5 +231,10 @@ def test_statuses_follow_evidence_whiteness_and_share():
     assert best_partial(judged["insufficient"], []) == []
     assert best_partial(None, []) == []
     # the same 80 % of an excess that sits in one flight only is not replicated: a gust, not physics
-    one = judge(_Fit([6000.0, 3000.0], [1e-9, 0.5]), "one", _Fit([3600.0, 3000.0], structured, n_ext=2), floor)
+    # when the candidate, as fitted, acts in the other flight too (reached)
+    base1, fit1 = _Fit([6000.0, 3000.0], [1e-9, 0.5]), _Fit([3600.0, 3000.0], structured, n_ext=2)
+    one = judge(base1, "one", fit1, floor, reached=lambda fit, origin: [0, 1])
     assert one.share == pytest.approx(0.8) and one.status == "insufficient"
+    # but physics of a state only flight g1 visits (a ground effect only the low flight reaches) is seen only there
+    low = judge(base1, "low", fit1, floor, reached=lambda fit, origin: [0])
+    assert low.status == "partially_explains"

@@ -198,6 +198,19 @@ def partial_words(result: dict) -> str:
             "the nearest formula the library has.")
 
 
+def _rejected_text(c: dict) -> str:
+    """Why an insufficient candidate was not adopted: too small a share, or a gain not replicated."""
+    rep = c.get("replication")
+    if rep and not rep["replicated"]:
+        where = ", ".join(rep["removing"]) or "no flight"
+        others = [f for f in (rep["acts_in"] or []) if f not in rep["removing"]]
+        also = (f"; as fitted it acts in {', '.join(others)} too, where it removes none" if others else "")
+        return (f"{c['id']} (ΔBIC {c['evidence']:.1f}, removes {_share_text(c.get('share_explained'))} of the "
+                f"excess misfit, but only in {where}{also}: not replicated)")
+    return (f"{c['id']} (ΔBIC {c['evidence']:.1f} but leaves structure and removes only "
+            f"{_share_text(c.get('share_explained'))} of the excess misfit, less than {100 * SHARE_PARTIAL:.0f} %)")
+
+
 def words(result: dict) -> str:
     """The diagnosis in words (printed by the command, shown in the report)."""
     lines = []
@@ -253,10 +266,7 @@ def words(result: dict) -> str:
                      "(a gust, a collision, a sensor or tracking fault, or physics the library lacks?).")
     rejected = [c for c in result["candidates"] if c["status"] == "insufficient" and c["round"] == 1]
     if result["unexplained"] and rejected and not partial:
-        lines.append("Not forced onto a term: " + ", ".join(
-            f"{c['id']} (ΔBIC {c['evidence']:.1f} but leaves structure and removes only "
-            f"{_share_text(c.get('share_explained'))} of the excess misfit, less than {100 * SHARE_PARTIAL:.0f} %)"
-            for c in rejected[:4]) + ".")
+        lines.append("Not forced onto a term: " + ", ".join(_rejected_text(c) for c in rejected[:4]) + ".")
     learned = learned_words(result)
     if learned:
         lines.append(learned)
@@ -499,6 +509,17 @@ def correlated_noise(cfg: RunConfig, diag: Diagnosis, build_for, candidates, pro
     return diag, {"model": "white", "ar1_evidence": gain, "ar1_rho": rho, "ar1_explains": False}, cfg
 
 
+def _replication_record(c, problem) -> dict | None:
+    """{replicated, removing: [flight], acts_in: [flight] or None} of a candidate whose share was large enough
+    for replication to be asked (:func:`.missing_physics.replication`), else None."""
+    if c.replication is None:
+        return None
+    names = [f.name for f in problem.flights]
+    acts = c.replication["reached"]
+    return {"replicated": c.replication["replicated"], "removing": [names[k] for k in c.replication["removing"]],
+            "acts_in": None if acts is None else [names[k] for k in acts]}
+
+
 def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progress: bool = True,
                  candidates=None, learn: bool = True) -> dict:
     """The ``diagnose`` command without its report (module docstring).
@@ -594,7 +615,7 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
     result["shifted_coefficients"] = coefficient_shifts(before_est, after_est) if diag.accepted else []
     result["candidates"] = [{"id": c.id, "evidence": c.delta_bic, "status": c.status, "share_explained": c.share,
                              "evidence_from_white_flights": c.clean_evidence, "per_flight_gain": c.per_flight_gain,
-                             "extra_parameters": c.extra_parameters,
+                             "extra_parameters": c.extra_parameters, "replication": _replication_record(c, problem),
                              "round": r + 1, "rms_mm": c.fit.rms_mm, "rms": c.fit.rms,
                              "structured_after": c.structured_after}
                             for r, ranked in enumerate(diag.rounds) for c in ranked]

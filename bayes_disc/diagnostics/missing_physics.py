@@ -35,7 +35,9 @@ under white noise, σ̂_g² √(2 n_g) per group): there is then no excess to sh
 * ``explains``: ΔBIC > threshold and every flight's residuals white;
 * ``partially_explains``: ΔBIC > threshold, structure left, share ≥ ``SHARE_PARTIAL``, and replicated:
   at least two flights (the only one of a one-flight run) have an excess of their own of which the
-  candidate removes at least half ``SHARE_PARTIAL`` (:func:`replicating_flights`; a gust marks one flight);
+  candidate removes at least half ``SHARE_PARTIAL`` (:func:`replicating_flights`; a gust marks one flight),
+  or the candidate, as fitted, acts only in the flights where it removes excess (:func:`reached_flights`: a
+  ground effect that only the one low flight reaches);
 * ``insufficient``: ΔBIC > threshold, structure left, share below it (or undefined, or not replicated);
 * ``no_evidence``: ΔBIC ≤ threshold.
 
@@ -64,7 +66,9 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..physics.parallel import mp_context
-from ..inference.leastsq import LeastSquaresResult, minimise, refine_least_squares, whitened_residuals
+from ..inference.leastsq import (LeastSquaresResult, jacobian_blocks, minimise, refine_least_squares,
+                                whitened_residuals)
+from ..inference.leastsq import flight_residuals as flight_residuals_whitened
 from ..inference.model import Problem
 from ..observation.models.markers import MarkerPositions
 from ..observation.registry import DATA_EXPLANATION, MODEL_EXTENSIONS, unit
@@ -263,12 +267,82 @@ def replicating_flights(base_ss: np.ndarray, cand_ss: np.ndarray, floor: np.ndar
     return out
 
 
-def replicated(base: ModelFit, cand_ss: np.ndarray, floor: np.ndarray) -> bool:
-    """Whether a candidate's removal of excess misfit is replicated (:func:`replicating_flights`) in two
-    flights, or in the only flight of a one-flight run."""
+#: a candidate reaches a flight when, as fitted, it moves the flight's whitened residuals by more than this
+#: many sd of their sum of squares under noise (√(2 n_k)), beyond what the flight's own parameters absorb
+REACH_SD = EXCESS_MIN_SD
+
+
+def switched_off(fit: ModelFit, origin: ModelFit) -> np.ndarray:
+    """θ of ``fit`` (dim,) with the parameters ``origin``'s model does not have at the values that switch
+    them off (:func:`extend_theta`)."""
+    back = origin.problem.layout.transfer(fit.ls.theta, fit.problem.layout, origin.ls.theta)
+    return extend_theta(back, origin.problem, fit.problem)
+
+
+def reach(fit: ModelFit, origin: ModelFit) -> np.ndarray:
+    """How much the terms ``fit`` adds to ``origin`` act in each flight, in units of the noise.
+
+    With δ_k = r_k(θ̂) − r_k(θ̂_off) the change of flight k's whitened residuals when the added terms are
+    switched off (every other parameter at the fit's optimum, :func:`switched_off`) and J_k the whitened
+    Jacobian of flight k's own parameters (launch state, per-flight nuisances),
+
+        D_k = |(I − J_k J_k⁺) δ_k|²,
+
+    the part of the terms' action the flight's launch cannot absorb. Under noise alone a flight's sum of
+    squares has sd √(2 n_k); D_k above ``REACH_SD`` of them cannot hide in the noise.
+
+    Parameters
+    ----------
+    fit : ModelFit
+        The model with the added terms.
+    origin : ModelFit
+        The model without them (same flights).
+
+    Returns
+    -------
+    (n_flights,) array
+        D_k / √(2 n_k), n_k the flight's residuals.
+    """
+    p, sigma = fit.problem, fit.ls.sigma
+    on, off = fit.ls.theta, switched_off(fit, origin)
+    r_on, r_off = flight_residuals_whitened(on, p, sigma), flight_residuals_whitened(off, p, sigma)
+    own = np.zeros(on.size, bool)
+    own[p.ic_start:] = True
+    J = jacobian_blocks(on, p, sigma, own)
+    out = np.empty(p.n_flights)
+    for k in range(p.n_flights):
+        d = r_on[k] - r_off[k]
+        A = J.blocks[k]
+        e = d - A @ np.linalg.lstsq(A, d, rcond=None)[0] if A.size else d
+        out[k] = float(e @ e) / np.sqrt(2.0 * max(d.size, 1))
+    return out
+
+
+def reached_flights(fit: ModelFit, origin: ModelFit, level: float = REACH_SD) -> list[int]:
+    """The flights the terms ``fit`` adds to ``origin`` act in beyond the noise (:func:`reach` > ``level``)."""
+    return [int(k) for k in np.flatnonzero(reach(fit, origin) > level)]
+
+
+def replication(base: ModelFit, fit: ModelFit, floor: np.ndarray, reached=reached_flights) -> dict:
+    """Whether a candidate's removal of excess misfit is replicated: in two flights (:func:`replicating_flights`),
+    in the only flight of a one-flight run, or in every flight the candidate, as fitted, acts in (``reached(fit,
+    base)``, default :func:`reached_flights`): physics of a state only some flights visit (a ground effect only
+    the low flight reaches) is seen only there, whereas a term bent to a gust in one flight acts in the others too
+    (a lower flight feels a ground effect more), where it removes nothing.
+
+    Returns
+    -------
+    dict
+        ``replicated`` (bool), ``removing`` (flight indices whose own excess it removes) and ``reached`` (flight
+        indices it acts in; None when not needed: two removing flights suffice).
+    """
     p = base.problem
     groups = [p.flight_groups(k) for k in range(p.n_flights)]
-    return len(replicating_flights(base.ss, cand_ss, floor, p.n_coords, groups)) >= min(2, p.n_flights)
+    removing = replicating_flights(base.ss, fit.ss, floor, p.n_coords, groups)
+    if len(removing) >= min(2, p.n_flights):
+        return {"replicated": True, "removing": removing, "reached": None}
+    acts = list(reached(fit, base)) if removing else None
+    return {"replicated": bool(removing) and set(acts) <= set(removing), "removing": removing, "reached": acts}
 
 
 @dataclass
@@ -285,10 +359,11 @@ class Candidate:
     clean_evidence: float = float("nan")
     extra_parameters: int = 0
     share: float = float("nan")
+    replication: dict | None = None      # :func:`replication`, when the share was large enough to ask
 
 
 def judge(base: ModelFit, cand_id: str, fit: ModelFit, floor: np.ndarray, threshold: float = EVIDENCE_THRESHOLD,
-          origin: ModelFit | None = None, share_partial: float = SHARE_PARTIAL) -> Candidate:
+          origin: ModelFit | None = None, share_partial: float = SHARE_PARTIAL, reached=reached_flights) -> Candidate:
     """One candidate judged against the model it extends.
 
     Parameters
@@ -306,6 +381,8 @@ def judge(base: ModelFit, cand_id: str, fit: ModelFit, floor: np.ndarray, thresh
         The base model of the diagnosis, whose excess misfit the share refers to; default ``base``.
     share_partial : float
         Least share of a partial explanation.
+    reached : callable
+        ``reached(fit, origin)``: the flights the candidate acts in (:func:`replication`).
 
     Returns
     -------
@@ -326,8 +403,9 @@ def judge(base: ModelFit, cand_id: str, fit: ModelFit, floor: np.ndarray, thresh
     else:
         if clean.all():
             c.status = "explains"
-        elif np.isfinite(c.share) and c.share >= share_partial and replicated(origin, fit.ss, floor):
-            c.status = "partially_explains"
+        elif np.isfinite(c.share) and c.share >= share_partial:
+            c.replication = replication(origin, fit, floor, reached)
+            c.status = "partially_explains" if c.replication["replicated"] else "insufficient"
         else:
             c.status = "insufficient"
         if clean.any():
