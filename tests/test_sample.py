@@ -126,6 +126,7 @@ def four_flights(four_flights_run):
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("four_flights")     # one worker samples the shared run
 def test_recovery_four_flights_noise_and_convergence(four_flights):
     summary, truth = four_flights
     p = summary["parameters"]
@@ -136,6 +137,7 @@ def test_recovery_four_flights_noise_and_convergence(four_flights):
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("four_flights")     # one worker samples the shared run
 def test_recovery_four_flights_every_coefficient_covered(four_flights):
     summary, truth = four_flights
     p = summary["parameters"]
@@ -156,6 +158,7 @@ def test_single_narrow_flight_is_much_less_informative(four_flights, tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("four_flights")     # one worker samples the shared run
 def test_sampler_agrees_with_importance_sampling(four_flights_run, four_flights):
     """The MCMC posterior of every coefficient matches an importance-sampling estimate of the same
     posterior: means within 0.25 sd, sds within 20 %. Proposal (any proposal gives a consistent estimate):
@@ -197,6 +200,7 @@ def test_sampler_agrees_with_importance_sampling(four_flights_run, four_flights)
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("four_flights")     # one worker samples the shared run
 def test_identifiability_verdicts_agree_with_the_posterior(four_flights_run):
     """`identifiability --profiles` on the sampled run: the fast verdicts (least squares, Fisher
     information, profiles) equal the verdicts from the posterior samples' widths, coefficient by coefficient."""
