@@ -223,3 +223,25 @@ def test_block_factors_of_a_gaussian_are_its_conditionals():
     s = t.ic_start
     np.testing.assert_allclose(shared @ shared.T, cov[:s, :s], rtol=1e-8)
     np.testing.assert_allclose(regression, cov[s:, :s] @ np.linalg.inv(cov[:s, :s]), rtol=1e-8, atol=1e-12)
+
+
+def test_default_walkers_with_block_moves():
+    """With block moves: 2·dim + 2 walkers on small problems, capped at WALKERS_CAP but never below the block
+    minimum 2·(s + p) + 2; without: 2·dim + 2; an explicit count is made even and kept above the minimum."""
+    from bayes_disc.inference.config import SamplerSettings
+    from bayes_disc.inference.sampler import WALKERS_CAP, n_walkers
+    block, plain = SamplerSettings(block_fraction=0.3), SamplerSettings(block_fraction=0.0)
+    small = _ArrowTarget(s=10, p=12, n_flights=4)                 # the demo's sizes: dim 58
+    assert n_walkers(block, small) == n_walkers(plain, small) == 2 * 58 + 2
+    big = _ArrowTarget(s=10, p=12, n_flights=24)
+    assert n_walkers(block, big) == WALKERS_CAP and n_walkers(plain, big) == 2 * big.dim + 2
+    wide = _ArrowTarget(s=60, p=12, n_flights=24)                 # block minimum above the cap
+    assert n_walkers(block, wide) == 2 * (60 + 12) + 2
+    assert n_walkers(SamplerSettings(block_fraction=0.3, walkers=61), big) == 62
+    assert n_walkers(SamplerSettings(block_fraction=0.3, walkers=10), big) == 2 * (10 + 12) + 2
+
+
+def test_block_moves_only_when_the_walkers_cannot_span_the_space():
+    from bayes_disc.inference.sampler import uses_block_moves
+    assert not uses_block_moves(0.3, 118, 58) and uses_block_moves(0.3, 116, 58)
+    assert not uses_block_moves(0.0, 46, 58)

@@ -5,7 +5,7 @@ Keys beyond SPEC §5 (all optional):
 ```yaml
 sampler:                 # emcee settings
   ensembles: 4           # independent ensembles; R-hat is computed across them
-  walkers: 0             # per ensemble; 0 = the smallest even number ≥ 2·dim
+  walkers: 0             # per ensemble; 0 = 2·dim + 2, at most 128 when block moves are enabled
   max_steps: 3000        # cap per ensemble
   check_every: 50        # steps between convergence checks
   min_steps: 400
@@ -13,7 +13,8 @@ sampler:                 # emcee settings
   rhat: 1.01             # ... R-hat across ensembles is below this ...
   ess: 400               # ... and every coefficient's bulk ESS reaches this
   independence_fraction: 0.3   # share of the independence (ridge-aware) and pCN moves (rest: DE moves)
-  block_fraction: 0.3    # share of the flight-block moves (Gibbs sweeps over flights, shared shifts)
+  block_fraction: 0.3    # share of the flight-block moves (Gibbs sweeps over flights, shared shifts),
+                         # used when the walkers are fewer than 2·dim + 2; 0 = never
   adapt_steps: 150       # warm-up: the pCN reference is re-fitted after 150 and 300 steps
   seed: 1
   processes: 2           # ensembles run in parallel processes
