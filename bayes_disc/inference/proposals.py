@@ -263,25 +263,38 @@ class RidgeProposal:
         return x
 
     # -- the conditional of the other parameters ---------------------------------------------------------
-    def _conditional(self, vi: np.ndarray):
+    def _segment(self, vi: np.ndarray):
+        """For values vi (n,) of θ_i: the segment k (n,), the weight a of its right end and the conditional
+        mean (n, dim − 1)."""
         k = np.clip(np.searchsorted(self.v, vi) - 1, 0, self.v.size - 2)
         a = np.clip((vi - self.v[k]) / (self.v[k + 1] - self.v[k]), 0.0, 1.0)
         m0 = self.means[k] + self.slopes[k] * (vi - self.v[k])[:, None]
         m1 = self.means[k + 1] + self.slopes[k + 1] * (vi - self.v[k + 1])[:, None]
-        mean = (1 - a)[:, None] * m0 + a[:, None] * m1
+        return k, a, (1 - a)[:, None] * m0 + a[:, None] * m1
+
+    def _conditional(self, vi: np.ndarray):
+        k, a, mean = self._segment(vi)
         L = (1 - a)[:, None, None] * self.chols[k] + a[:, None, None] * self.chols[k + 1]
         return mean, L
 
     def log_density(self, x: np.ndarray) -> np.ndarray:
+        """ln q(x) for points x (n, dim): ln g(x_i) + ln N(x_−i; mean(x_i), L(x_i) L(x_i)ᵀ), every point's
+        triangular system solved at once (forward substitution row by row over all points: the sampler
+        evaluates this for every walker at every independence jump)."""
         x = np.atleast_2d(x)
         vi = x[:, self.index]
-        mean, L = self._conditional(vi)
+        k, a, mean = self._segment(vi)
         r = np.delete(x, self.index, axis=1) - mean
-        out = self.log_g_density(vi) - 0.5 * r.shape[1] * np.log(2 * np.pi)
-        for n in range(x.shape[0]):
-            z = solve_triangular(L[n], r[n], lower=True, check_finite=False)
-            out[n] -= np.sum(np.log(np.diag(L[n]))) + 0.5 * z @ z
-        return out
+        d = r.shape[1]
+        w0, w1 = (1 - a)[:, None], a[:, None]              # L(v) = (1 − a) L_k + a L_k+1
+        z = np.empty_like(r)
+        log_det = np.zeros(r.shape[0])
+        for i in range(d):
+            rows = self.chols[:, i, : i + 1]                 # (K, i + 1): row i of every point's factor
+            row = w0 * rows[k] + w1 * rows[k + 1]
+            z[:, i] = (r[:, i] - np.einsum("nj,nj->n", row[:, :i], z[:, :i])) / row[:, i]
+            log_det += np.log(row[:, i])
+        return self.log_g_density(vi) - 0.5 * d * np.log(2 * np.pi) - log_det - 0.5 * np.einsum("ni,ni->n", z, z)
 
     def draw(self, n: int, random) -> np.ndarray:
         vi = self.draw_g(n, random)
