@@ -32,7 +32,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bayes_disc.calibration.config import load_cal_config  # noqa: E402
-from bayes_disc.calibration.replicate import replicate_data  # noqa: E402
+from bayes_disc.calibration.replicate import replicate_data, replicate_run  # noqa: E402
 from bayes_disc.inference.config import config_from_mapping  # noqa: E402
 from bayes_disc.inference.data import build_problem  # noqa: E402
 from bayes_disc.inference.leastsq import fit_least_squares, refine_least_squares  # noqa: E402
@@ -45,9 +45,7 @@ def laplace_z(cal, index: int, names, fix_rho: float | None = None) -> tuple[np.
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         write_synth(result, tmp / "markers.csv", tmp / "truth.json")
-        run = {**cal.run, "name": "z", "flights": [{"file": "markers.csv"}], "markers": dict(cal.template.markers),
-               "output": "run", "sampler": {**cal.run.get("sampler", {}), "seed": seed}}
-        cfg = config_from_mapping(run, tmp / "config.yaml")
+        cfg = config_from_mapping(replicate_run(cal, result, seed), tmp / "config.yaml")
         problem = build_problem(cfg)
         t0 = time.perf_counter()
         ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,

@@ -135,6 +135,15 @@ def rank_record(truth: dict, chains: np.ndarray, names: list[str], tau: float, n
     return rec
 
 
+def replicate_run(cal: CalConfig, result: SynthResult, sampler_seed: int) -> dict:
+    """The run configuration (a mapping for :func:`bayes_disc.api.sample`) of one replicate: the campaign's
+    run settings on the replicate's data written as ``markers.csv`` and ``truth.json`` beside it, results in
+    ``run/``, the replicate's own sampler seed."""
+    return {**cal.run, "name": result.truth["name"], "flights": [{"file": "markers.csv"}],
+            "markers": dict(cal.template.markers), "truth": "truth.json", "output": "run",
+            "sampler": {**cal.run.get("sampler", {}), "seed": sampler_seed}}
+
+
 def run_replicate(cal: CalConfig, index: int) -> dict:
     """Replicate ``index``: truth → synthetic flights → least squares + sampler → ranks and coverage.
 
@@ -159,10 +168,7 @@ def run_replicate(cal: CalConfig, index: int) -> dict:
     with tempfile.TemporaryDirectory(prefix=f"bd-cal-{index:05d}-") as tmp:
         tmp = Path(tmp)
         write_synth(result, tmp / "markers.csv", tmp / "truth.json")
-        run = {**cal.run, "name": result.truth["name"], "flights": [{"file": "markers.csv"}],
-               "markers": dict(cal.template.markers), "truth": "truth.json", "output": "run",
-               "sampler": {**cal.run.get("sampler", {}), "seed": sampler_seed}}
-        res = sample(run, base_dir=tmp, progress=False)
+        res = sample(replicate_run(cal, result, sampler_seed), base_dir=tmp, progress=False)
         post = res.idata.posterior
         chains = np.stack([posterior_draws(post, n) for n in cal.names], axis=-1)
         conv = res.convergence
