@@ -12,7 +12,7 @@ sampler:                 # emcee settings
   n_tau: 10              # stop when every chain is ≥ n_tau · τ long (τ: emcee's estimator) ...
   rhat: 1.01             # ... R-hat across ensembles is below this ...
   ess: 400               # ... and every coefficient's bulk ESS reaches this
-  independence_fraction: 0.3   # share of the independence (ridge-aware) and pCN moves (rest: DE moves)
+  independence_fraction: 0.8   # share of the independence (ridge-aware) and pCN moves (rest: DE moves)
   block_fraction: 0.3    # share of the flight-block moves (Gibbs sweeps over flights, shared shifts),
                          # used when the walkers are fewer than 2·dim + 2; 0 = never
   adapt_steps: 150       # warm-up: the pCN reference is re-fitted after 150 and 300 steps
@@ -60,7 +60,7 @@ class SamplerSettings:
     n_tau: float = 10.0
     rhat: float = 1.01
     ess: float = 400.0
-    independence_fraction: float = 0.3
+    independence_fraction: float = 0.8
     block_fraction: float = 0.3
     adapt_steps: int = 150
     seed: int = 1
@@ -268,7 +268,7 @@ def config_from_mapping(data: dict, path, output_override=None) -> RunConfig:
         n_tau=s.number("n_tau", 10.0, positive=True),
         rhat=s.number("rhat", 1.01, minimum=1.0),
         ess=s.number("ess", 400.0, positive=True),
-        independence_fraction=s.number("independence_fraction", 0.3, minimum=0.0, maximum=1.0),
+        independence_fraction=s.number("independence_fraction", 0.8, minimum=0.0, maximum=1.0),
         block_fraction=s.number("block_fraction", 0.3, minimum=0.0, maximum=1.0),
         adapt_steps=s.number("adapt_steps", 150, integer=True, minimum=10),
         seed=s.number("seed", 1, integer=True, nonnegative=True),
