@@ -267,7 +267,7 @@ def test_every_cal_key_is_documented_with_its_default(tmp_path):
 
 
 def test_a_campaign_recorded_before_the_template_had_nature_still_resumes(tmp_path):
-    """runs/calibration/out_ar1 was recorded before SynthSpec gained ``nature``: its key (template repr without
+    """runs/calibration/out_ar1_f03 (then out_ar1) was recorded before SynthSpec gained ``nature``: its key (template repr without
     the field) is accepted while the template has no nature, and refused once it has one."""
     from dataclasses import replace
 
