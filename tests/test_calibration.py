@@ -26,7 +26,8 @@ def _conjugate_replicates(n_rep, n_draws, rng, sd_factor=1.0):
         y = theta + rng.normal()
         draws = y / 2 + np.sqrt(0.5) * sd_factor * rng.normal(size=n_draws)
         many = y / 2 + np.sqrt(0.5) * sd_factor * rng.normal(size=4000)
-        records.append({"ranks": {"t": sbc_rank(theta, draws)},
+        records.append({"ranks": {"t": sbc_rank(theta, draws)}, "truth": {"t": theta},
+                        "posterior": {"t": {"mean": float(many.mean()), "sd": float(many.std())}},
                         "covered": {"50": {"t": covers(theta, many, 0.5)}, "90": {"t": covers(theta, many, 0.9)}}})
     return records
 
@@ -40,6 +41,7 @@ def test_ranks_of_the_true_posterior_are_uniform_and_intervals_cover():
     for level in ("50", "90"):
         lo, hi = res["coverage_band_95"][level]
         assert lo <= c[f"coverage_{level}"] <= hi
+    assert abs(c["z_sd"] - 1.0) < 3 * res["z_sd_se"]
 
 
 @pytest.mark.parametrize("sd_factor, shape", [(0.5, "too narrow"), (2.0, "too wide")])
@@ -53,6 +55,7 @@ def test_a_miscalibrated_posterior_is_caught(sd_factor, shape):
     counts = np.array(c["rank_counts"])
     edges, middle = counts[[0, -1]].mean(), counts[3:7].mean()
     assert (edges > middle) if sd_factor < 1 else (edges < middle)       # ∪ when too narrow, ∩ when too wide
+    assert c["z_sd"] == pytest.approx(1.0 / sd_factor, rel=0.1)          # the widths' error itself
 
 
 def test_rank_and_interval_definitions():

@@ -13,6 +13,11 @@ is Binomial(N, c) and its central 95 % range (:func:`binomial_band`) is where an
 Posterior draws of MCMC are autocorrelated: :func:`thinned_draws` keeps every ⌈τ⌉-th step of every chain
 (τ: integrated autocorrelation time in steps) before choosing the L draws, so that they are close to
 independent; otherwise the rank histogram is ∪-shaped even for a correct posterior.
+
+Width: the standardised error z = (θ̃ − posterior mean) / posterior sd has sd 1 over the replicates when the
+intervals have the right width (exactly so for Gaussian posteriors, near it otherwise); ``z_sd`` > 1 says
+too narrow, < 1 too wide. Its standard error ≈ 1/√(2(N − 1)) makes it a sharper test of the width than the
+coverage counts (N = 100: ± 0.07 against a 50 % coverage band of ± 0.10).
 """
 from __future__ import annotations
 
@@ -183,13 +188,21 @@ def binomial_band(n: int, p: float, mass: float = BAND_MASS) -> tuple[float, flo
     return float(lo / n), float(hi / n)
 
 
+def z_sd(records: list[dict], name: str) -> float:
+    """sd over the replicates (ddof 1) of z = (θ̃ − posterior mean) / posterior sd of coefficient ``name``
+    (records with ``truth`` and ``posterior`` {name: {"mean", "sd"}}); NaN for fewer than 2."""
+    z = [(r["truth"][name] - r["posterior"][name]["mean"]) / r["posterior"][name]["sd"] for r in records]
+    return float(np.std(z, ddof=1)) if len(z) > 1 else float("nan")
+
+
 def summarize(records: list[dict], names: list[str], n_draws: int, bins: int | None = None) -> dict:
     """``calibration.json`` content from the replicate records.
 
     Parameters
     ----------
     records : list of dict
-        Successful replicates, each with ``ranks`` {name: r} and ``covered`` {"50"|"90": {name: bool}}.
+        Successful replicates, each with ``ranks`` {name: r}, ``covered`` {"50"|"90": {name: bool}}, and
+        ``truth`` and ``posterior`` {name: {"mean", "sd"}} (for ``z_sd``).
     names : list of str
         Coefficients, in order.
     n_draws : int
@@ -201,7 +214,7 @@ def summarize(records: list[dict], names: list[str], n_draws: int, bins: int | N
     -------
     dict
         ``replicates`` N and per coefficient ``coverage_50``, ``coverage_90``, ``rank_uniformity_p``,
-        ``rank_counts`` (B,), and the campaign-wide ``rank_bins``, ``draws_per_replicate``,
+        ``rank_counts`` (B,), ``z_sd`` (:func:`z_sd`), and the campaign-wide ``z_sd_se`` 1/√(2(N − 1)), ``rank_bins``, ``draws_per_replicate``,
         ``coverage_band_95`` {level: [low, high]} and ``rank_count_band_95`` [low, high] (count per bin).
     """
     n = len(records)
@@ -215,8 +228,10 @@ def summarize(records: list[dict], names: list[str], n_draws: int, bins: int | N
                  for lv in LEVELS}
         entry["rank_uniformity_p"] = rank_uniformity_p(counts)
         entry["rank_counts"] = counts.tolist()
+        entry["z_sd"] = z_sd(records, name)
         coefficients[name] = entry
     lo, hi = binomial_band(n, 1.0 / b)
     return {"replicates": n, "coefficients": coefficients, "rank_bins": b, "draws_per_replicate": n_draws,
             "coverage_band_95": {str(int(100 * lv)): list(binomial_band(n, lv)) for lv in LEVELS},
-            "rank_count_band_95": [lo * n, hi * n]}
+            "rank_count_band_95": [lo * n, hi * n],
+            "z_sd_se": 1.0 / math.sqrt(2 * (n - 1)) if n > 1 else float("nan")}

@@ -243,21 +243,31 @@ class Chains:
     wall_time_s: float = 0.0
 
 
-def _read(paths, blobs: bool = False):
-    chains, lps, acc, ss = [], [], [], []
-    for p in paths:
-        b = emcee.backends.HDFBackend(str(p), read_only=True)
-        chains.append(b.get_chain())
-        lps.append(b.get_log_prob())
-        acc.append(b.accepted / max(b.iteration, 1))
-        if blobs:  # S_f per flight; emcee drops the last axis when there is one flight
-            c = chains[-1]
-            ss.append(np.asarray(b.get_blobs(), float).reshape(c.shape[0], c.shape[1], -1))
-    n = min(c.shape[0] for c in chains)
-    out = (np.stack([c[:n] for c in chains]), np.stack([lp[:n] for lp in lps]), np.stack(acc))
-    if blobs:
-        out = out + (np.stack([x[:n] for x in ss]),)
-    return out
+def _read(paths, blobs: bool = False, start: int = 0):
+    """The ensembles' stored steps from ``start`` on: chain (n_ens, n, walkers, dim), log-probabilities
+    (n_ens, n, walkers), acceptance fractions (n_ens, walkers) and, with ``blobs``, S_g (n_ens, n, walkers,
+    n_groups); n the shortest ensemble's steps after ``start``. Read into one preallocated array per
+    quantity, only the steps asked for (memory: the part of the chain in use, not the whole run)."""
+    backends = [emcee.backends.HDFBackend(str(p), read_only=True) for p in paths]
+    n = min(b.iteration for b in backends) - start
+    if n <= 0:
+        raise ValueError(f"{Path(paths[0]).parent}: no stored step after step {start}")
+    walkers, dim = backends[0].shape
+    chain = np.empty((len(paths), n, walkers, dim))
+    lp = np.empty((len(paths), n, walkers))
+    acc = np.stack([b.accepted / max(b.iteration, 1) for b in backends])
+    ss = None
+    for e, b in enumerate(backends):
+        with b.open() as f:
+            g = f[b.name]
+            chain[e] = g["chain"][start: start + n]
+            lp[e] = g["log_prob"][start: start + n]
+            if blobs:  # S_g per noise group; emcee drops the last axis when there is one
+                x = np.asarray(g["blobs"][start: start + n], float).reshape(n, walkers, -1)
+                if ss is None:
+                    ss = np.empty((len(paths), n, walkers, x.shape[-1]))
+                ss[e] = x
+    return (chain, lp, acc, ss) if blobs else (chain, lp, acc)
 
 
 def _tau(chain: np.ndarray, c: float = 5.0) -> np.ndarray:
@@ -282,22 +292,43 @@ def _tau(chain: np.ndarray, c: float = 5.0) -> np.ndarray:
     return tau
 
 
-def convergence(chain: np.ndarray, settings: SamplerSettings, coef_idx: np.ndarray, min_burn: int = 0):
-    """Burn-in, τ, R-hat and ESS for chain (n_ens, n_steps, n_walkers, dim); returns a verdict dict.
+#: parameters per block in the convergence statistics (ArviZ copies what it is given several times)
+CHECK_BLOCK = 32
 
-    Burn-in: the warm-up (``min_burn``) and at least 5 τ after it."""
+
+def convergence(chain: np.ndarray, settings: SamplerSettings, coef_idx: np.ndarray, first_step: int = 0):
+    """Burn-in, τ, R-hat and ESS; returns a verdict dict.
+
+    Parameters
+    ----------
+    chain : (n_ens, n, n_walkers, dim) array
+        The ensembles' steps from ``first_step`` on (the warm-up before it is burn-in).
+    settings : SamplerSettings
+    coef_idx : (k,) int array
+        Parameters whose bulk ESS must reach ``settings.ess``.
+    first_step : int
+        Step number of ``chain[:, 0]``.
+
+    Returns
+    -------
+    dict
+        ``burn`` (absolute step: the warm-up and at least 5 τ after it, at most half of what follows it),
+        ``tau`` (n_ens, dim), ``n_over_tau``, ``rhat_max``, ``ess_min_coef``, ``converged``. R-hat and ESS
+        are computed :data:`CHECK_BLOCK` parameters at a time, so memory stays near the chain's own.
+    """
     from .diagnostics_mcmc import ess_bulk, rhat_across
-    n_ens, n_steps = chain.shape[:2]
-    tau0 = np.array([_tau(chain[e, min_burn:]) for e in range(n_ens)])
-    burn = int(min(min_burn + np.ceil(5 * np.nanmax(tau0)), min_burn + (n_steps - min_burn) // 2))
-    post = chain[:, burn:]
+    n_ens, n = chain.shape[:2]
+    tau0 = np.array([_tau(chain[e]) for e in range(n_ens)])
+    skip = int(min(np.ceil(5 * np.nanmax(tau0)), n // 2))
+    post = chain[:, skip:]
     tau = np.array([_tau(post[e]) for e in range(n_ens)])
-    n_over_tau = (n_steps - burn) / np.nanmax(tau)
-    rh = rhat_across(post)
-    ess = ess_bulk(post)
-    ok = (n_steps >= settings.min_steps and n_over_tau >= settings.n_tau and np.all(rh < settings.rhat)
+    n_over_tau = (n - skip) / np.nanmax(tau)
+    blocks = [slice(j, j + CHECK_BLOCK) for j in range(0, chain.shape[-1], CHECK_BLOCK)]
+    rh = np.concatenate([rhat_across(post[..., b]) for b in blocks])
+    ess = np.concatenate([ess_bulk(post[..., b]) for b in blocks])
+    ok = (first_step + n >= settings.min_steps and n_over_tau >= settings.n_tau and np.all(rh < settings.rhat)
           and np.all(ess[coef_idx] >= settings.ess))
-    return {"burn": burn, "tau": tau, "n_over_tau": float(n_over_tau), "rhat_max": float(np.max(rh)),
+    return {"burn": first_step + skip, "tau": tau, "n_over_tau": float(n_over_tau), "rhat_max": float(np.max(rh)),
             "ess_min_coef": float(np.min(ess[coef_idx])), "converged": bool(ok)}
 
 
@@ -566,9 +597,9 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
                     record({"steps": done, "aligned": True, "ensemble_steps": steps})
                 while True:
                     if done > 0 and proposal.adapted < ADAPTATIONS and done >= adapt_at[proposal.adapted]:
-                        chain, _, _ = _read(paths)
                         lo = adapt_at[proposal.adapted - 1] if proposal.adapted else 0
-                        warm = chain[:, (lo + done) // 2: done].reshape(-1, problem.dim)
+                        first = (lo + done) // 2
+                        warm = _read(paths, start=first)[0][:, : done - first].reshape(-1, problem.dim)
                         proposal = proposal.refit(warm)
                         proposal.save(prop_path)
                         sub = warm[np.random.default_rng(settings.seed + done).choice(len(warm), min(len(warm), 4000),
@@ -580,8 +611,8 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
                         logger.debug(f"warm-up adaptation {proposal.adapted} of {ADAPTATIONS} at step {done}")
                         break  # new pool with the new proposal
                     if done >= adapt_at[-1] + settings.check_every and checked != done:
-                        chain, _, _ = _read(paths)
-                        verdict = convergence(chain, settings, coef_idx, min_burn=adapt_at[-1])
+                        verdict = convergence(_read(paths, start=adapt_at[-1])[0], settings, coef_idx,
+                                              first_step=adapt_at[-1])
                         checked, fraction = done, convergence_fraction(verdict, settings, done)
                         record({"steps": done, **{k: v for k, v in verdict.items() if k != "tau"}})
                         bar.show(Progress(done, settings.max_steps, fraction, verdict), checked=True)
@@ -602,17 +633,18 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
                              checked=False)
     finally:
         bar.close()
-    chain, lp, acc, ss = _read(paths, blobs=True)
     lengths = {int(emcee.backends.HDFBackend(str(p), read_only=True).iteration) for p in paths}
     if len(lengths) != 1:
         raise RuntimeError(f"{chain_dir}: ensembles of unequal length {sorted(lengths)} after sampling")
+    total = lengths.pop()
     # no convergence check (the cap came during the warm-up): the warm-up is burn-in, at most half the chain
-    burn = verdict["burn"] if checked is not None else min(adapt_at[-1], chain.shape[1] // 2)
-    sigma = problem.draw_sigma(ss[:, burn:].reshape(-1, problem.n_groups), np.random.default_rng(settings.seed),
-                               chain[:, burn:].reshape(-1, problem.dim)).reshape(ss[:, burn:].shape)
+    burn = verdict["burn"] if checked is not None else min(adapt_at[-1], total // 2)
+    chain, lp, acc, ss = _read(paths, blobs=True, start=burn)
+    sigma = problem.draw_sigma(ss.reshape(-1, problem.n_groups), np.random.default_rng(settings.seed),
+                               chain.reshape(-1, problem.dim)).reshape(ss.shape)
     reason = ("converged" if verdict["converged"] else
               f"cap of {settings.max_steps} steps reached before convergence")
     hist_path.write_text(json.dumps(history, indent=1))
-    return Chains(chain=chain[:, burn:], log_prob=lp[:, burn:], sigma=sigma, acceptance=acc, burn=burn,
-                  total_steps=chain.shape[1], tau=verdict["tau"], converged=verdict["converged"], reason=reason,
+    return Chains(chain=chain, log_prob=lp, sigma=sigma, acceptance=acc, burn=burn,
+                  total_steps=total, tau=verdict["tau"], converged=verdict["converged"], reason=reason,
                   history=history, wall_time_s=time.perf_counter() - t_start)

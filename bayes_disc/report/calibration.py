@@ -72,7 +72,7 @@ def calibration_sections(result: dict, figures_dir: Path) -> list[Section]:
     rows = []
     for name, c in result["coefficients"].items():
         rows.append([name, fmt(c["coverage_50"], 3), _inside(c["coverage_50"], bands["50"]), fmt(c["coverage_90"], 3),
-                     _inside(c["coverage_90"], bands["90"]), fmt(c["rank_uniformity_p"], 3)])
+                     _inside(c["coverage_90"], bands["90"]), fmt(c["rank_uniformity_p"], 3), fmt(c.get("z_sd"), 3)])
     failed = result.get("failed", [])
     unconv = result.get("not_converged", [])
     lead = (f"<p class=lead>{n} replicates ranked (of {result.get('requested', n)} requested; {len(failed)} failed, "
@@ -80,11 +80,12 @@ def calibration_sections(result: dict, figures_dir: Path) -> list[Section]:
             f"{esc(result.get('truth_draw', '?'))}; L = {result['draws_per_replicate']} thinned posterior draws "
             f"per replicate, ranks in {b} bins. Binomial 95 % bands: 50 % interval "
             f"{fmt(bands['50'][0], 3)}–{fmt(bands['50'][1], 3)}, 90 % interval {fmt(bands['90'][0], 3)}–"
-            f"{fmt(bands['90'][1], 3)}.</p>")
+            f"{fmt(bands['90'][1], 3)}. sd of the standardised error z = (truth − posterior mean)/sd: 1 for intervals "
+            f"of the right width, &gt; 1 too narrow (± {fmt(result.get('z_sd_se'), 2)} for N = {n}).</p>")
     summary = Section("summary", "Calibration summary",
                       "coverage inside its band and rank uniformity p not small (say > 0.01) mean honest intervals",
                       lead + table(["coefficient", "coverage 50 %", "in band", "coverage 90 %", "in band",
-                                    "rank uniformity p (χ²)"], rows))
+                                    "rank uniformity p (χ²)", "sd of z"], rows))
     if failed:
         summary.html += "<p>Failed replicates: " + "; ".join(esc(f"{f['index']}: {f['error']}") for f in failed) + "</p>"
     ranks = Section("ranks", "Rank histograms",
