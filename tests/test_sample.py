@@ -221,9 +221,10 @@ def test_ar1_posterior_is_as_wide_as_importance_sampling_says(tmp_path):
     The sampler as it was (a 0.3 share of independence and pCN moves, the rest differential evolution)
     stopped by its rule with intervals 5–19 % too narrow here (CRp 0.81, CRr 0.83, CMa 0.90 of an
     importance-sampling estimate with the Laplace proposal alone): in ~60 dimensions an ensemble that has
-    contracted re-expands under DE moves only over thousands of steps (on an exact Gaussian with this posterior's covariance, DE alone held an ensemble
-    started at 0.83 of the sd at 0.78 for 2000 steps), and R-hat, ESS and τ cannot see a contraction that
-    every ensemble shares. This was the cause of the AR(1) campaign's too-narrow intervals (README)."""
+    contracted re-expands under DE moves only over thousands of steps (on an exact Gaussian with this
+    posterior's covariance, DE alone held an ensemble started at 0.83 of the sd at 0.78 for 2000 steps), and
+    R-hat, ESS and τ cannot see a contraction that every ensemble shares. It was part of the AR(1)
+    campaign's too-narrow intervals (README)."""
     from bayes_disc.api import sample
     from bayes_disc.calibration.config import load_cal_config
     from bayes_disc.calibration.replicate import replicate_data, replicate_run
