@@ -215,7 +215,8 @@ def summarize(records: list[dict], names: list[str], n_draws: int, bins: int | N
     dict
         ``replicates`` N and per coefficient ``coverage_50``, ``coverage_90``, ``rank_uniformity_p``,
         ``rank_counts`` (B,), ``z_sd`` (:func:`z_sd`), and the campaign-wide ``z_sd_se`` 1/√(2(N − 1)),
-        ``rank_bins``, ``draws_per_replicate``, ``coverage_band_95`` {level: [low, high]} and ``rank_count_band_95`` [low, high] (count per bin).
+        ``rank_bins``, ``draws_per_replicate``, ``coverage_band_95`` {level: [low, high]} and
+        ``rank_count_band_95`` [low, high] (count per bin).
     """
     n = len(records)
     b = rank_bins(n_draws, n, bins)
