@@ -273,11 +273,6 @@ class RidgeProposal:
         m1 = self.means[k + 1] + self.slopes[k + 1] * (vi - self.v[k + 1])[:, None]
         return k, a, (1 - a)[:, None] * m0 + a[:, None] * m1
 
-    def _conditional(self, vi: np.ndarray):
-        k, a, mean = self._segment(vi)
-        L = (1 - a)[:, None, None] * self.chols[k] + a[:, None, None] * self.chols[k + 1]
-        return mean, L
-
     def log_density(self, x: np.ndarray) -> np.ndarray:
         """ln q(x) for points x (n, dim): ln g(x_i) + ln N(x_−i; mean(x_i), L(x_i) L(x_i)ᵀ), every point's
         triangular system solved in one compiled pass (:func:`._ridge_kernels.interpolated_solve`: the
