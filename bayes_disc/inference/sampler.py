@@ -1,8 +1,8 @@
 """emcee ensembles over coefficients, extra-term parameters, every flight's initial conditions and noise.
 
 * Several independent ensembles (R-hat across ensembles), each with its own ``emcee.backends.HDFBackend``
-  file, advanced in rounds of ``check_every`` steps (in parallel processes), so an interrupted run
-  resumes from the files with no lost samples.
+  file (written once per round by :class:`.backend.RoundBackend`), advanced in rounds of ``check_every``
+  steps (in parallel processes), so an interrupted run resumes from the files with no lost samples.
 * Walkers start from a ridge-aware approximation of the posterior (:mod:`.proposals`), over-dispersed
   relative to the Laplace approximation where the posterior is, so that R-hat across ensembles can see
   a failure to mix.
@@ -51,6 +51,7 @@ import emcee
 import numpy as np
 
 from ..physics.parallel import mp_context
+from .backend import RoundBackend
 from .config import SamplerSettings
 from .model import Problem
 from .moves import FlightBlockMove, SharedShift, block_factors
@@ -208,7 +209,7 @@ def _pool(settings, initargs):
 def _advance(task) -> int:
     path, n_steps, start, seed = task
     problem, proposal, independence = _WORKER["problem"], _WORKER["proposal"], _WORKER["independence"]
-    backend = emcee.backends.HDFBackend(str(path))
+    backend = RoundBackend(str(path))
     nw = start.shape[0] if start is not None else backend.shape[0]
     sampler = emcee.EnsembleSampler(nw, problem.dim, problem.log_prob_blobs, vectorize=True, backend=backend,
                                     moves=_moves(problem, proposal, independence, _WORKER["fraction"],
@@ -217,11 +218,14 @@ def _advance(task) -> int:
     # fewer walkers than parameters (block moves on): they cannot be linearly independent, which emcee's
     # start check demands; the block moves, not the ensemble's span, make the chain move in every direction
     skip = nw <= problem.dim
-    if start is not None:
-        sampler.random_state = np.random.RandomState(seed).get_state()
-        sampler.run_mcmc(start, n_steps, progress=False, skip_initial_state_check=skip)
-    else:
-        sampler.run_mcmc(None, n_steps, progress=False, skip_initial_state_check=skip)
+    try:
+        if start is not None:
+            sampler.random_state = np.random.RandomState(seed).get_state()
+            sampler.run_mcmc(start, n_steps, progress=False, skip_initial_state_check=skip)
+        else:
+            sampler.run_mcmc(None, n_steps, progress=False, skip_initial_state_check=skip)
+    finally:
+        backend.flush()     # the steps done, also when interrupted
     return backend.iteration
 
 
