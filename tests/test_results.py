@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 
 import arviz as az
+import h5py
 import numpy as np
 import pytest
 
@@ -15,7 +16,7 @@ from bayes_disc.inference.config import load_config
 from bayes_disc.inference.data import build_problem
 from bayes_disc.inference.diagnostics_mcmc import rhat_across
 from bayes_disc.inference.results import (build_inference_data, build_summary, compare_runs, ensemble_view,
-                                          load_posterior, pointwise_log_likelihood, posterior_draws)
+                                          load_posterior, pointwise_log_likelihood, posterior_draws, write_posterior)
 from bayes_disc.inference.sampler import Chains
 from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
 
@@ -77,7 +78,7 @@ def _run(folder: Path, name: str, extra: str = "", seed: int = 0):
     summary = build_summary(problem, chains, idata, {}, {"name": name})
     out = folder / f"out_{name}"
     out.mkdir(exist_ok=True)
-    idata.to_netcdf(str(out / "posterior.nc"))
+    write_posterior(idata, out / "posterior.nc")
     (out / "summary.json").write_text(json.dumps(summary))
     return problem, chains, idata, summary
 
@@ -90,6 +91,22 @@ def base(folder):
 @pytest.fixture(scope="module")
 def side(folder):
     return _run(folder, "side", "physics: {side_force: {CY: 0.0}}", seed=1)
+
+
+def test_posterior_file_reads_back_as_written(base, folder):
+    """write_posterior's filters are lossless: every group, variable, coordinate and attribute comes back."""
+    idata = base[2]
+    back = load_posterior(folder / "out_base" / "posterior.nc")
+    assert sorted(back.groups()) == sorted(set(idata.groups()))
+    for g in idata.groups():
+        a, b = getattr(idata, g), getattr(back, g)
+        assert sorted(a.variables) == sorted(b.variables), g
+        for name in a.variables:
+            np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=f"{g}/{name}")
+        assert a.attrs.keys() <= b.attrs.keys(), g
+    with h5py.File(folder / "out_base" / "posterior.nc", "r") as f:
+        lp = f["sample_stats/lp"]
+        assert lp.compression == "gzip" and lp.shuffle
 
 
 def test_posterior_has_flight_dimension_and_ensemble_walker_coords(base, folder):

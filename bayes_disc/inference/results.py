@@ -534,6 +534,35 @@ def build_inference_data(problem: Problem, chains: Chains, rng: np.random.Genera
     return idata
 
 
+#: HDF5 filters of posterior.nc's numeric variables: zlib at level 1 after byte shuffling. The demo's
+#: 500-step run: 35 MB written in 3.4 s, against 37 MB in 8.0 s by ``InferenceData.to_netcdf`` (zlib level 4,
+#: no shuffle, and the groups ArviZ lists twice written twice); medians of 3 on a shared 2-core machine.
+NETCDF_FILTERS = {"zlib": True, "complevel": 1, "shuffle": True}
+
+
+def write_posterior(idata: az.InferenceData, path) -> None:
+    """Write ``idata`` as ``posterior.nc``: ``az.InferenceData.to_netcdf``'s layout (root attributes, then
+    one netCDF group per InferenceData group, engine h5netcdf), with :data:`NETCDF_FILTERS` on every numeric
+    variable; ``az.from_netcdf`` reads it as any ArviZ file.
+
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+        The run's InferenceData (:func:`build_inference_data`).
+    path : str or Path
+        File to (over)write.
+    """
+    mode = "w"
+    if idata.attrs:
+        xr.Dataset(attrs=idata.attrs).to_netcdf(str(path), mode=mode, engine="h5netcdf", group="/")
+        mode = "a"
+    for group in dict.fromkeys(idata.groups()):     # ArviZ lists a group twice once it has been extended
+        data = getattr(idata, group)
+        encoding = {name: dict(NETCDF_FILTERS) for name, v in data.variables.items() if v.dtype.kind in "biufc"}
+        data.to_netcdf(str(path), mode=mode, group=group, engine="h5netcdf", encoding=encoding)
+        mode = "a"
+
+
 def load_posterior(path) -> az.InferenceData:
     """Read a posterior.nc into memory (the file is closed afterwards, so a later run can rewrite it).
 
