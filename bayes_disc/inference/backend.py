@@ -5,10 +5,10 @@ demo (118 walkers, 58 parameters, 4 noise blobs) that costs ≈ 10 ms per step a
 of a sampling step whose log-posterior costs ≈ 15 ms for the whole ensemble —, and emcee's checks of every
 step open it four more times (walkers, dimension, blobs, iteration). :class:`RoundBackend` keeps the steps
 of one ``run_mcmc`` call in memory, remembers what it read of the file's layout, and writes the steps in one
-go when the round ends (:meth:`flush`). The
-file is the same, byte for byte in its datasets and attributes, as emcee's own after the same steps (the
-chain, log-probability, blobs, acceptance counts, iteration and the random state of the last step; tested):
-the format, the resume and every reader are unchanged. An interruption in the middle of a round loses that
+go when the round ends (:meth:`flush`). The file is the same, value for value in its datasets and
+attributes, as emcee's own after the same steps (the chain, log-probability, blobs, acceptance counts,
+iteration and the random state of the last step; tested): the format, the resume and every reader are
+unchanged. An interruption in the middle of a round loses that
 round's steps (at most ``check_every``), as an interrupted round did before: a resumed run starts from the
 last step written.
 """
