@@ -187,6 +187,8 @@ def test_tiny_campaign_on_two_workers_resumes_without_redoing(tmp_path, capsys):
     assert [f.name for f in files] == ["replicate_00000.json", "replicate_00001.json"]
     first = {f.name: f.stat().st_mtime_ns for f in files}
     rec1 = json.loads(files[1].read_text())
+    # the run's sampler settings are recorded, the configured ones and the defaults
+    assert rec1["sampler"]["max_steps"] == 60 and rec1["sampler"]["independence_fraction"] == 0.8
     files[0].unlink()
     p.write_text(TINY.format(n=3))
     capsys.readouterr()

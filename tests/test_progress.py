@@ -106,7 +106,7 @@ def test_convergence_fraction_is_the_worst_criterion_and_one_only_when_converged
 
 
 def test_progress_line_shows_the_cap_but_measures_convergence():
-    s = SamplerSettings(max_steps=3000)
+    s = SamplerSettings(max_steps=3000, adapt_steps=150, check_every=50)
     warm = Progress(steps=100, cap=3000, fraction=0.0, verdict=None).describe(s)
     assert "step 100 (cap 3000)" in warm and "warm-up until step 350" in warm
     v = {"rhat_max": 1.034, "ess_min_coef": 210.0, "n_over_tau": 8.0, "converged": False}

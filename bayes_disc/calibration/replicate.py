@@ -144,6 +144,12 @@ def replicate_run(cal: CalConfig, result: SynthResult, sampler_seed: int) -> dic
             "sampler": {**cal.run.get("sampler", {}), "seed": sampler_seed}}
 
 
+#: sampler settings a replicate records (its run's, defaults included): the defaults may change between the
+#: sessions of one resumed campaign
+SAMPLER_RECORD = ("ensembles", "walkers", "independence_fraction", "block_fraction", "adapt_steps", "min_steps",
+                  "check_every", "n_tau", "rhat", "ess", "max_steps")
+
+
 def run_replicate(cal: CalConfig, index: int) -> dict:
     """Replicate ``index``: truth → synthetic flights → least squares + sampler → ranks and coverage.
 
@@ -158,7 +164,7 @@ def run_replicate(cal: CalConfig, index: int) -> dict:
     -------
     dict
         The replicate record (JSON-ready): ``index``, ``status`` "ok", ``truth`` {name: value}, the
-        :func:`rank_record` keys, ``convergence`` (the run's), ``redraws``, ``synth_seed``,
+        :func:`rank_record` keys, ``convergence`` (the run's), ``sampler`` (:data:`SAMPLER_RECORD`), ``redraws``, ``synth_seed``,
         ``sampler_seed``, ``host``, ``wall_time_s``; the defects injected (per flight, when any).
     """
     from ..api import sample
@@ -172,11 +178,13 @@ def run_replicate(cal: CalConfig, index: int) -> dict:
         post = res.idata.posterior
         chains = np.stack([posterior_draws(post, n) for n in cal.names], axis=-1)
         conv = res.convergence
+        sampler = res.raw["sampler_settings"]
     rec = {"index": index, "status": "ok", "truth": truth,
            **rank_record(truth, chains, cal.names, float(conv["tau_max_steps"]), cal.draws,
                          np.random.default_rng([cal.seed, index, 1])),
            "convergence": {k: conv.get(k) for k in ("converged", "reason", "total_steps", "burn_in_steps",
                                                     "tau_max_steps", "r_hat_max", "ess_bulk_min_coefficient")},
+           "sampler": {k: sampler[k] for k in SAMPLER_RECORD},
            "redraws": redraws, "synth_seed": int(result.truth["seed"]), "sampler_seed": sampler_seed,
            "host": socket.gethostname(), "wall_time_s": time.perf_counter() - t0}
     defects = {f: v["defects"] for f, v in result.truth["flights"].items() if "defects" in v}

@@ -8,14 +8,14 @@ sampler:                 # emcee settings
   walkers: 0             # per ensemble; 0 = 2·dim + 2, at most 128 when block moves are enabled
   max_steps: 3000        # cap per ensemble
   check_every: 50        # steps between convergence checks
-  min_steps: 400
+  min_steps: 300
   n_tau: 10              # stop when every chain is ≥ n_tau · τ long (τ: emcee's estimator) ...
   rhat: 1.01             # ... R-hat across ensembles is below this ...
   ess: 400               # ... and every coefficient's bulk ESS reaches this
   independence_fraction: 0.8   # share of the independence (ridge-aware) and pCN moves (rest: DE moves)
   block_fraction: 0.3    # share of the flight-block moves (Gibbs sweeps over flights, shared shifts),
                          # used when the walkers are fewer than 2·dim + 2; 0 = never
-  adapt_steps: 150       # warm-up: the pCN reference is re-fitted after 150 and 300 steps
+  adapt_steps: 75        # warm-up: the proposals are re-fitted after 75 and 150 steps
   seed: 1
   processes: 2           # ensembles run in parallel processes
 least_squares: {starts: 4, max_nfev: 200}
@@ -56,13 +56,13 @@ class SamplerSettings:
     walkers: int = 0
     max_steps: int = 3000
     check_every: int = 50
-    min_steps: int = 400
+    min_steps: int = 300
     n_tau: float = 10.0
     rhat: float = 1.01
     ess: float = 400.0
     independence_fraction: float = 0.8
     block_fraction: float = 0.3
-    adapt_steps: int = 150
+    adapt_steps: int = 75
     seed: int = 1
     processes: int = 2
 
@@ -264,13 +264,13 @@ def config_from_mapping(data: dict, path, output_override=None) -> RunConfig:
         walkers=s.number("walkers", 0, integer=True, nonnegative=True),
         max_steps=s.number("max_steps", 3000, integer=True, minimum=10),
         check_every=s.number("check_every", 50, integer=True, minimum=5),
-        min_steps=s.number("min_steps", 400, integer=True, minimum=5),
+        min_steps=s.number("min_steps", 300, integer=True, minimum=5),
         n_tau=s.number("n_tau", 10.0, positive=True),
         rhat=s.number("rhat", 1.01, minimum=1.0),
         ess=s.number("ess", 400.0, positive=True),
         independence_fraction=s.number("independence_fraction", 0.8, minimum=0.0, maximum=1.0),
         block_fraction=s.number("block_fraction", 0.3, minimum=0.0, maximum=1.0),
-        adapt_steps=s.number("adapt_steps", 150, integer=True, minimum=10),
+        adapt_steps=s.number("adapt_steps", 75, integer=True, minimum=10),
         seed=s.number("seed", 1, integer=True, nonnegative=True),
         processes=s.number("processes", 2, integer=True, minimum=1),
     )
