@@ -164,7 +164,8 @@ def run_replicate(cal: CalConfig, index: int) -> dict:
     -------
     dict
         The replicate record (JSON-ready): ``index``, ``status`` "ok", ``truth`` {name: value}, the
-        :func:`rank_record` keys, ``convergence`` (the run's), ``sampler`` (:data:`SAMPLER_RECORD`), ``redraws``, ``synth_seed``,
+        :func:`rank_record` keys, ``convergence`` (the run's), ``sampler`` (:data:`SAMPLER_RECORD`),
+        ``redraws``, ``synth_seed``,
         ``sampler_seed``, ``host``, ``wall_time_s``; the defects injected (per flight, when any).
     """
     from ..api import sample

@@ -8,9 +8,9 @@ of one ``run_mcmc`` call in memory, remembers what it read of the file's layout,
 go when the round ends (:meth:`flush`). The file is the same, value for value in its datasets and
 attributes, as emcee's own after the same steps (the chain, log-probability, blobs, acceptance counts,
 iteration and the random state of the last step; tested): the format, the resume and every reader are
-unchanged. An interruption in the middle of a round loses that
-round's steps (at most ``check_every``), as an interrupted round did before: a resumed run starts from the
-last step written.
+unchanged. An interruption in the middle of a round keeps the steps done (the sampler flushes in a
+``finally``); a killed process loses that round's steps (at most ``check_every``), and a resumed run starts
+from the last step written.
 """
 from __future__ import annotations
 
