@@ -26,7 +26,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bayes_disc.calibration.config import load_cal_config  # noqa: E402
-from bayes_disc.calibration.replicate import draw_truth, jittered_flights, replicate_rng, replicate_run  # noqa: E402
+from bayes_disc.calibration.replicate import (draw_truth, jittered_flights, replicate_data,  # noqa: E402
+                                              replicate_rng, replicate_run)
 from bayes_disc.inference.config import config_from_mapping  # noqa: E402
 from bayes_disc.inference.data import build_problem  # noqa: E402
 from bayes_disc.inference.leastsq import fit_least_squares, refine_least_squares  # noqa: E402
@@ -48,6 +49,9 @@ def main(argv=None) -> int:
     truth = draw_truth(cal, rng)
     flights = tuple(replace(f, noise_mm=f.noise_mm * a.scale) for f in jittered_flights(cal, rng))
     names = list(cal.names)
+    # the stream above is replicate_data's first draw; a replicate whose first truth failed to simulate was redrawn
+    if replicate_data(cal, a.replicate)[1] != truth:
+        raise SystemExit(f"replicate {a.replicate} was redrawn: its truth is not the stream's first draw")
     zs = []
     for k in range(a.fits):
         spec = replace(cal.template, name=f"fixed_{a.replicate}", flights=flights,
