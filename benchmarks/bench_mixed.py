@@ -28,6 +28,7 @@ sys.path.insert(0, str(ROOT))
 from bayes_disc.inference.config import load_config  # noqa: E402
 from bayes_disc.inference.data import build_problem  # noqa: E402
 from bayes_disc.inference.leastsq import refine_least_squares  # noqa: E402
+from bayes_disc.inference.truth import truth_theta  # noqa: E402
 from bayes_disc.observation.synth import load_synth_spec, synthesize, write_synth  # noqa: E402
 from bayes_disc.physics import COEFFICIENT_NAMES  # noqa: E402
 
@@ -73,36 +74,6 @@ def write_data(folder: Path) -> dict:
     for kind, body in (("markers", MARKERS), ("imu", IMU), ("both", MARKERS + IMU)):
         (folder / f"{kind}.yaml").write_text(f"name: mixed_{kind}\nprior: potts_crowther\noutput: out_{kind}\n" + body)
     return json.loads((folder / "truth.json").read_text())
-
-
-def truth_theta(problem, truth: dict) -> np.ndarray:
-    """θ of ``problem`` at the truth: coefficients, the logger's mount, each flight's initial state and its
-    logger parameters (the others at the problem's start)."""
-    theta = problem.start_vector()
-    names = problem.names
-    coef = truth["coefficients"]
-    theta[: problem.n_coef] = [coef[n] for n in COEFFICIENT_NAMES]
-    if "imu" in truth:
-        lg = truth["imu"]["logger"]
-        shared = {"imu_offset_x": lg["offset_m"][0], "imu_offset_y": lg["offset_m"][1],
-                  "imu_offset_z": lg["offset_m"][2], "imu_lpf_tau": lg["lpf_tau_s"], "imu_tilt_1": lg["tilt_rad"][0],
-                  "imu_tilt_2": lg["tilt_rad"][1]}
-        for n, v in shared.items():
-            if n in names:
-                theta[names.index(n)] = v
-    for k, f in enumerate(problem.flights):
-        s = truth["flights"][f.name]["initial_state"]
-        y0 = np.r_[s["position_m"], s["velocity_m_s"], s["quaternion_wxyz_body_to_world"], s["omega_body_rad_s"]]
-        theta[problem.ic_slice(k)] = problem.state_to_ic(y0, k)
-        t = truth.get("imu", {}).get("throws", {}).get(f.name)
-        if t is None or f"imu_period_{f.name}" not in names:
-            continue
-        own = {"imu_period": t["period_s"], **{f"gyro_bias_{a}": v for a, v in zip("xyz", t["gyro_bias_rad_s"])},
-               **{f"acc_bias_{a}": v for a, v in zip("xyz", t["acc_bias_m_s2"])},
-               **{f"lpf_state_{a}": v for a, v in zip("xyz", t["lpf_state_m_s2"])}}
-        for n, v in own.items():
-            theta[names.index(f"{n}_{f.name}")] = v
-    return theta
 
 
 def fit(folder: Path, kind: str, truth: dict, max_nfev: int) -> dict:

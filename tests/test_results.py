@@ -18,6 +18,7 @@ from bayes_disc.inference.diagnostics_mcmc import rhat_across
 from bayes_disc.inference.results import (build_inference_data, build_summary, compare_runs, ensemble_view,
                                           load_posterior, pointwise_log_likelihood, posterior_draws, write_posterior)
 from bayes_disc.inference.sampler import Chains
+from bayes_disc.inference.truth import truth_theta
 from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
 
 CONFIG = """name: {name}
@@ -45,25 +46,13 @@ def folder(tmp_path_factory):
     return d
 
 
-def _truth_theta(problem, truth) -> np.ndarray:
-    theta = problem.prior_mean.copy()
-    for i, n in enumerate(problem.names[: problem.n_coef]):
-        theta[i] = truth["coefficients"][n]
-    for k, f in enumerate(problem.flights):
-        s = truth["flights"][f.name]["initial_state"]
-        state = np.concatenate([s["position_m"], s["velocity_m_s"], s["quaternion_wxyz_body_to_world"],
-                                s["omega_body_rad_s"]]).astype(float)
-        theta[problem.ic_slice(k)] = problem.state_to_ic(state, k)
-    return theta
-
-
 def _run(folder: Path, name: str, extra: str = "", seed: int = 0):
     """(problem, chains, idata, summary) of a short fake run around the truth, written to out_<name>/."""
     cfg_path = folder / f"{name}.yaml"
     cfg_path.write_text(CONFIG.format(name=name, extra=extra))
     problem = build_problem(load_config(cfg_path))
     rng = np.random.default_rng(seed)
-    theta0 = _truth_theta(problem, json.loads((folder / "truth.json").read_text()))
+    theta0 = truth_theta(problem, json.loads((folder / "truth.json").read_text()))
     scale = 1e-3 * problem.prior_sd
     chain = theta0 + scale * rng.standard_normal((N_ENS, N_STEPS, N_W, problem.dim))
     flat = chain.reshape(-1, problem.dim)

@@ -371,9 +371,8 @@ class ReportContext:
             return None
         if abs(float(s.get("t", f.times[0])) - float(f.times[0])) > 1e-9:
             return None
-        state = np.concatenate([s["position_m"], s["velocity_m_s"], s["quaternion_wxyz_body_to_world"],
-                                s["omega_body_rad_s"]]).astype(float)
-        return self.problem.state_to_ic(state, k)
+        from ..inference.truth import initial_state
+        return self.problem.state_to_ic(initial_state(t, f.name), k)
 
     def truth_sigma(self, name: str) -> float | None:
         t = self.run.truth
