@@ -162,17 +162,19 @@ def replicate_z(cal, index: int, names, rho: str, fit: bool) -> dict:
     theta = truth_theta(problem, truth)
     idx = [problem.names.index(n) for n in names]
     if rho == "integrated":
+        if not any(n.startswith("rho_") for n in problem.names):
+            raise SystemExit(f"--rho integrated: {cal.path} does not fit AR(1) noise (run.noise.model ar1)")
         rho_true = theta[[problem.names.index(f"rho_{f.name}") for f in problem.flights]]
         tau = np.array([truth["flights"][f.name]["noise_m"] for f in problem.flights]) * np.sqrt(1 - rho_true ** 2)
         mean, sd, info = rho_integrated(problem, theta, tau, np.random.default_rng([index, 28]))
         rho_idx = [i for i, n in enumerate(problem.names) if n.startswith("rho_")]
-        return {"index": index, "dim": None, "Q": None, "z": [float((theta[i] - mean[i]) / sd[i]) for i in idx],
+        return {"index": index, "dim": None, "Q": None, "has_rho": True, "z": [float((theta[i] - mean[i]) / sd[i]) for i in idx],
                 "rho_mean": mean[rho_idx].tolist(), "rho_sd": sd[rho_idx].tolist(), **info}
     held = np.array([rho == "held" and n.startswith("rho_") for n in problem.names])
     free = ~held
     cols = np.cumsum(free) - 1                               # θ index -> free index
     delta, C, Q = at_truth(problem, theta, free)
-    out = {"index": index, "dim": int(free.sum()), "Q": Q,
+    out = {"index": index, "dim": int(free.sum()), "Q": Q, "has_rho": any(n.startswith("rho_") for n in problem.names),
            "z": [float(-delta[cols[i]] / np.sqrt(C[cols[i], cols[i]])) for i in idx]}
     if fit:
         ls = refine_least_squares(problem, theta, max_nfev=60, free=free)
@@ -245,7 +247,8 @@ def main(argv=None) -> int:
         return 0
     how = ("least squares from the truth" if a.fit else "one Gauss–Newton step from the truth" if linear
            else "the posterior linear in θ at the truth, ρ integrated")
-    print(f"{n} replicates ({a.first}–{a.first + n - 1}) of {a.campaign}: {how}, AR(1) ρ {a.rho}; "
+    rho = f", AR(1) ρ {a.rho}" if rows[0]["has_rho"] else ""
+    print(f"{n} replicates ({a.first}–{a.first + n - 1}) of {a.campaign}: {how}{rho}; "
           f"{out['seconds_per_replicate']:.2f} s each")
     if linear:
         print(f"mean Q {out['Q_mean']:.2f} for χ²_{out['dim_mean']:.0f} (se {out['Q_mean_se']:.2f})")
