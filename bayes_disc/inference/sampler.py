@@ -618,7 +618,8 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
                         verdict = convergence(_read(paths, start=adapt_at[-1])[0], settings, coef_idx,
                                               first_step=adapt_at[-1])
                         checked, fraction = done, convergence_fraction(verdict, settings, done)
-                        record({"steps": done, **{k: v for k, v in verdict.items() if k != "tau"}})
+                        record({"steps": done, "elapsed_s": round(time.perf_counter() - t_start, 3),
+                                **{k: v for k, v in verdict.items() if k != "tau"}})
                         bar.show(Progress(done, settings.max_steps, fraction, verdict), checked=True)
                         if verdict["converged"]:
                             finished = True
