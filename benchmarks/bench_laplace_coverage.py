@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -32,30 +31,22 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bayes_disc.calibration.config import load_cal_config  # noqa: E402
-from bayes_disc.calibration.replicate import replicate_data, replicate_run  # noqa: E402
-from bayes_disc.inference.config import config_from_mapping  # noqa: E402
-from bayes_disc.inference.data import build_problem  # noqa: E402
+from bayes_disc.calibration.replicate import replicate_problem  # noqa: E402
 from bayes_disc.inference.leastsq import fit_least_squares, refine_least_squares  # noqa: E402
-from bayes_disc.observation.synth import write_synth  # noqa: E402
 
 
 def laplace_z(cal, index: int, names, fix_rho: float | None = None) -> tuple[np.ndarray, float, list]:
     """(z_LS per name, seconds, fitted AR(1) coefficients ρ̂ of the flights, if any) of replicate ``index``."""
-    result, truth, _, seed = replicate_data(cal, index)
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        write_synth(result, tmp / "markers.csv", tmp / "truth.json")
-        cfg = config_from_mapping(replicate_run(cal, result, seed), tmp / "config.yaml")
-        problem = build_problem(cfg)
-        t0 = time.perf_counter()
-        ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
-                               seed=cfg.sampler.seed)
-        if fix_rho is not None:            # the AR(1) coefficients held at a value (the truth): refit the rest
-            held = np.array([n.startswith("rho_") for n in problem.names])
-            x0 = ls.theta.copy()
-            x0[held] = fix_rho
-            ls = refine_least_squares(problem, x0, max_nfev=cfg.least_squares.max_nfev, free=~held)
-        dt = time.perf_counter() - t0
+    problem, cfg, _, truth = replicate_problem(cal, index)
+    t0 = time.perf_counter()
+    ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
+                           seed=cfg.sampler.seed)
+    if fix_rho is not None:            # the AR(1) coefficients held at a value (the truth): refit the rest
+        held = np.array([n.startswith("rho_") for n in problem.names])
+        x0 = ls.theta.copy()
+        x0[held] = fix_rho
+        ls = refine_least_squares(problem, x0, max_nfev=cfg.least_squares.max_nfev, free=~held)
+    dt = time.perf_counter() - t0
     idx = [problem.names.index(n) for n in names]
     sd = np.sqrt(np.diag(ls.cov))[idx]
     rho = [float(v) for n, v in zip(problem.names, ls.theta) if n.startswith("rho_")]   # AR(1) noise, if fitted

@@ -38,7 +38,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -49,23 +48,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bayes_disc.calibration.config import load_cal_config  # noqa: E402
-from bayes_disc.calibration.replicate import replicate_data, replicate_run  # noqa: E402
+from bayes_disc.calibration.replicate import replicate_problem  # noqa: E402
 from bayes_disc.calibration.stats import LEVELS  # noqa: E402
-from bayes_disc.inference.config import config_from_mapping  # noqa: E402
-from bayes_disc.inference.data import build_problem  # noqa: E402
 from bayes_disc.inference.leastsq import _steps, jacobian_blocks, refine_least_squares, whitened_residuals, _rms  # noqa: E402
 from bayes_disc.inference.truth import truth_theta  # noqa: E402
-from bayes_disc.observation.synth import write_synth  # noqa: E402
-
-
-def replicate_problem(cal, index: int):
-    """(problem, truth JSON) of replicate ``index``, built as the campaign's fit builds it."""
-    result, _, _, seed = replicate_data(cal, index)
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        write_synth(result, tmp / "markers.csv", tmp / "truth.json")
-        cfg = config_from_mapping(replicate_run(cal, result, seed), tmp / "config.yaml")
-        return build_problem(cfg), result.truth
 
 
 def at_truth(problem, theta: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
@@ -158,7 +144,8 @@ def rho_integrated(problem, theta: np.ndarray, tau: np.ndarray, rng: np.random.G
 
 
 def replicate_z(cal, index: int, names, rho: str, fit: bool) -> dict:
-    problem, truth = replicate_problem(cal, index)
+    problem, _, result, _ = replicate_problem(cal, index)
+    truth = result.truth
     theta = truth_theta(problem, truth)
     idx = [problem.names.index(n) for n in names]
     if rho == "integrated":

@@ -287,3 +287,23 @@ def test_a_campaign_recorded_before_the_template_had_nature_still_resumes(tmp_pa
     assert natured.earlier_keys() == []
     with pytest.raises(ConfigError, match="another campaign"):
         check_campaign(natured)
+
+
+def test_replicate_problem_is_what_the_replicates_fit_builds():
+    """The problem of a campaign replicate, for checks that do not sample: the campaign's run settings (AR(1)
+    noise, two least-squares starts), the replicate's flights and truth; at θ̃ (bayes_disc.inference.truth)
+    the effective residuals over σ have mean square 1 − ρ² (the innovations, scaled by |W|^(−1/n))."""
+    from bayes_disc.calibration.replicate import replicate_data, replicate_problem
+    from bayes_disc.inference.leastsq import flight_residuals
+    from bayes_disc.inference.truth import truth_theta
+    repo = Path(__file__).resolve().parents[1]
+    cal = load_cal_config(repo / "runs/calibration/cal4_ar1.yaml")
+    problem, cfg, result, truth = replicate_problem(cal, 3)
+    assert truth == replicate_data(cal, 3)[1]
+    assert cfg.least_squares.starts == 2
+    assert [f.name for f in problem.flights] == [f.name for f in cal.template.flights]
+    assert all(f"rho_{f.name}" in problem.names for f in problem.flights)
+    theta = truth_theta(problem, result.truth)
+    sigma = np.array([result.truth["flights"][f.name]["noise_m"] for f in problem.flights])
+    ms = [np.mean(r ** 2) for r in flight_residuals(theta, problem, sigma)]
+    assert np.allclose(ms, 1 - 0.85 ** 2, atol=0.06), ms        # ~900 residuals a flight: sd ≈ 0.013

@@ -144,6 +144,31 @@ def replicate_run(cal: CalConfig, result: SynthResult, sampler_seed: int) -> dic
             "sampler": {**cal.run.get("sampler", {}), "seed": sampler_seed}}
 
 
+def replicate_problem(cal: CalConfig, index: int):
+    """The statistical problem replicate ``index``'s fit builds (:func:`bayes_disc.inference.data.build_problem`
+    on :func:`replicate_run`'s configuration), for checks that do not sample (benchmarks/bench_linear_sbc.py,
+    bench_laplace_coverage.py).
+
+    Returns
+    -------
+    problem : Problem
+    config : RunConfig
+        The replicate's run configuration (least-squares and sampler settings).
+    result : SynthResult
+        Its synthetic data and their truth JSON.
+    truth : dict
+        The coefficients drawn, {name: value}.
+    """
+    from ..inference.config import config_from_mapping
+    from ..inference.data import build_problem
+    result, truth, _, sampler_seed = replicate_data(cal, index)
+    with tempfile.TemporaryDirectory(prefix=f"bd-cal-{index:05d}-") as tmp:
+        tmp = Path(tmp)
+        write_synth(result, tmp / "markers.csv", tmp / "truth.json")
+        cfg = config_from_mapping(replicate_run(cal, result, sampler_seed), tmp / "config.yaml")
+        return build_problem(cfg), cfg, result, truth
+
+
 #: sampler settings a replicate records (its run's, defaults included): the defaults may change between the
 #: sessions of one resumed campaign
 SAMPLER_RECORD = ("ensembles", "walkers", "independence_fraction", "block_fraction", "adapt_steps", "min_steps",
