@@ -10,7 +10,7 @@ whitened residuals there (then the prior's standardised deviations),
 
 When the data come from the model's own noise law and the truth from the prior, z_j ~ N(0, 1) and
 Q ~ χ²_dim exactly in the linear model: sd(z) and mean Q test the noise model and the synthesis against each
-other over hundreds of data sets in minutes (about 1 s per data set); the campaign's sampler is not involved.
+other over hundreds of data sets in minutes (0.2–0.4 s per data set); the campaign's sampler is not involved.
 σ of each flight is its residuals' RMS at the truth.
 
 ``--rho held`` fixes every flight's AR(1) coefficient at the truth (its columns out of J); ``free`` (the
@@ -23,9 +23,10 @@ integrated by adaptive importance sampling with weights p(y | ρ) p(ρ) / q(ρ),
     log p(y | ρ) = log|W(ρ)| − n log σ(ρ) − ½ min_δ (|W(ρ)(r₀ + J₀ δ)/σ(ρ)|² + |(θ̃ + δ − μ)/s|²)
                    − ½ log det A(ρ) + const;
 
-held is each flight's innovation sd τ_f = σ_f √(1 − ρ_f²) (at the truth), not σ_f: the data fix τ_f to
-~2 % and, given ρ, a Jeffreys prior on σ_f is one on τ_f, whereas a known σ_f would pin ρ_f through the
-stationary variance σ_f² (a posterior sd of ρ 0.007 instead of the 0.017 a run with σ free reports);
+held at its true value is each flight's innovation sd τ_f = σ_f √(1 − ρ_f²), not σ_f: the data fix τ_f to
+~2 %, so holding it agrees to first order with the sampler, which integrates σ_f under a Jeffreys prior (given
+ρ, a Jeffreys prior on σ_f is one on τ_f), whereas a known σ_f would pin ρ_f through the stationary variance
+σ_f² (a posterior sd of ρ 0.007 instead of the 0.017 a run with σ free reports);
 the coefficients' posterior mean and sd are the mixture's. ``--fit`` instead minimises from the truth (nonlinear least squares with
 the flights' σ re-estimated, as ``least_squares.json``) and standardises with the Laplace covariance there.
 Where the campaign has a record of the replicate, its posterior z = (θ̃ − mean)/sd is compared.
@@ -69,16 +70,24 @@ def at_truth(problem, theta: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, 
 
 def raw_linearisation(problem, theta: np.ndarray, cols: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """(r₀ (n_k,), J₀ (n_k, len(cols))) of flight k's marker channel at θ: the raw residuals (prediction −
-    data) [m] and their central-difference Jacobian over the θ columns ``cols``."""
-    (c, pred), ok = problem.channel_predictions(theta[None], k)[0][0], None
-    r0 = c.residuals(pred)[0]
+    data) [m] and their central-difference Jacobian over the θ columns ``cols``.
+
+    Raises
+    ------
+    SystemExit
+        If flight k has other channels than its markers, or a simulation failed.
+    """
+    if len(problem.channels[k]) != 1:
+        raise SystemExit(f"flight {problem.flights[k].name!r}: --rho integrated handles marker-only flights")
     h = _steps(problem, theta)[cols]
-    lanes = np.repeat(theta[None], 2 * cols.size, axis=0)
+    lanes = np.repeat(theta[None], 2 * cols.size + 1, axis=0)
     lanes[np.arange(cols.size), cols] += h
     lanes[cols.size + np.arange(cols.size), cols] -= h
-    (c, pred), = problem.channel_predictions(lanes, k)[0]
+    [(c, pred)], ok = problem.channel_predictions(lanes, k)
+    if not np.all(ok):
+        raise SystemExit(f"flight {problem.flights[k].name!r}: a simulation near the truth failed")
     r = c.residuals(pred)
-    return r0, ((r[: cols.size] - r[cols.size:]) / (2 * h)[:, None]).T
+    return r[-1], ((r[: cols.size] - r[cols.size: 2 * cols.size]) / (2 * h)[:, None]).T
 
 
 def rho_integrated(problem, theta: np.ndarray, tau: np.ndarray, rng: np.random.Generator,
@@ -199,6 +208,8 @@ def main(argv=None) -> int:
     ap.add_argument("--fit", action="store_true", help="least squares from the truth instead of one linear step")
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
+    if a.fit and a.rho == "integrated":
+        ap.error("--fit and --rho integrated exclude each other")
     cal = load_cal_config(a.campaign)
     names = list(cal.names)
     rows, t0 = [], time.perf_counter()
@@ -209,7 +220,7 @@ def main(argv=None) -> int:
             print(f"{len(rows)}/{a.replicates} replicates, {time.perf_counter() - t0:.0f} s", file=sys.stderr, flush=True)
     z = np.array([r["z"] for r in rows])
     n = len(rows)
-    linear = a.rho != "integrated"
+    linear = a.rho != "integrated" and not a.fit           # Q is the linear step's
     dims = np.array([r["dim"] for r in rows]) if linear else np.zeros(1)
     Q = np.array([r["Q"] for r in rows]) if linear else np.zeros(1)
     paired = [(r["z"], r["campaign_z"]) for r in rows if r["campaign_z"] is not None]
@@ -218,7 +229,7 @@ def main(argv=None) -> int:
            "sd_z": dict(zip(names, z.std(0, ddof=1).tolist())), "sd_z_se": 1 / np.sqrt(2 * (n - 1)),
            "coverage": {lv: dict(v, names=names) for lv, v in coverage(z).items()},
            **({"Q_mean": float(Q.mean()), "dim_mean": float(dims.mean()), "Q_mean_se": float(np.sqrt(2 * dims.mean() / n))}
-              if linear else {"rho_posterior_mean": float(np.mean([r["rho_mean"] for r in rows])),
+              if linear else {} if a.fit else {"rho_posterior_mean": float(np.mean([r["rho_mean"] for r in rows])),
                               "rho_posterior_sd": float(np.mean([r["rho_sd"] for r in rows])),
                               "min_ess": float(min(r["ess"] for r in rows))})}
     if a.fit:
@@ -226,7 +237,7 @@ def main(argv=None) -> int:
         out["rho_hat"] = {"mean": float(rh.mean()), "median": float(np.median(rh)), "n": int(rh.size)} if rh.size else None
     if paired:
         zl, zc = (np.array(v) for v in zip(*paired))
-        out["campaign"] = {"replicates": len(paired), "sd_z_here": dict(zip(names, zl.std(0, ddof=1).tolist())),
+        out["campaign_records"] = {"replicates": len(paired), "sd_z_here": dict(zip(names, zl.std(0, ddof=1).tolist())),
                            "sd_z_campaign": dict(zip(names, zc.std(0, ddof=1).tolist())),
                            "correlation": {nm: float(np.corrcoef(zl[:, j], zc[:, j])[0, 1]) for j, nm in enumerate(names)}}
     if a.json:
@@ -250,7 +261,7 @@ def main(argv=None) -> int:
     if a.fit and out.get("rho_hat"):
         print(f"AR(1) ρ̂: mean {out['rho_hat']['mean']:.4f}, median {out['rho_hat']['median']:.4f} over {out['rho_hat']['n']} flights")
     if paired:
-        c = out["campaign"]
+        c = out["campaign_records"]
         print(f"campaign records for {c['replicates']} of these: sd z here / campaign, correlation")
         for nm in names:
             print(f"{nm:6s} {c['sd_z_here'][nm]:6.3f} {c['sd_z_campaign'][nm]:6.3f} {c['correlation'][nm]:6.3f}")

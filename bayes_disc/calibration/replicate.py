@@ -147,7 +147,9 @@ def replicate_run(cal: CalConfig, result: SynthResult, sampler_seed: int) -> dic
 def replicate_problem(cal: CalConfig, index: int):
     """The statistical problem replicate ``index``'s fit builds (:func:`bayes_disc.inference.data.build_problem`
     on :func:`replicate_run`'s configuration), for checks that do not sample (benchmarks/bench_linear_sbc.py,
-    bench_laplace_coverage.py).
+    bench_laplace_coverage.py). The marker flights as the fit reads them, before any robust cleaning and
+    without inertial logs; the configuration's file paths point into a temporary folder that is gone (use
+    its settings only).
 
     Returns
     -------

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..observation.markers import FlightObservation
 from ..physics import COEFFICIENT_NAMES
 from .model import Problem
 
@@ -43,6 +44,8 @@ def truth_theta(problem: Problem, truth: dict) -> np.ndarray:
     ------
     KeyError
         If the truth has no entry for one of the problem's flights.
+    ValueError
+        If a marker flight's samples do not start where the truth's initial state is given.
     """
     theta = problem.start_vector()
     names = problem.names
@@ -54,6 +57,10 @@ def truth_theta(problem: Problem, truth: dict) -> np.ndarray:
             if n in names:
                 theta[names.index(n)] = logger[key] if i is None else logger[key][i]
     for k, f in enumerate(problem.flights):
+        t0 = float(truth["flights"][f.name]["initial_state"].get("t", 0.0))
+        if isinstance(f, FlightObservation) and abs(float(f.times[0]) - t0) > 1e-9:
+            raise ValueError(f"flight {f.name!r}: its samples start at t = {float(f.times[0]):g} s, the truth's "
+                             f"initial state is at t = {t0:g} s (a trimmed window has other initial conditions)")
         theta[problem.ic_slice(k)] = problem.state_to_ic(initial_state(truth, f.name), k)
         rho = truth["flights"][f.name].get("defects", {}).get("ar1_rho")
         if rho is not None and f"rho_{f.name}" in names:
