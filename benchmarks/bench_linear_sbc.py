@@ -168,15 +168,16 @@ def replicate_z(cal, index: int, names, rho: str, fit: bool) -> dict:
                 "rho_mean": mean[rho_idx].tolist(), "rho_sd": sd[rho_idx].tolist(), **info}
     held = np.array([rho == "held" and n.startswith("rho_") for n in problem.names])
     free = ~held
-    cols = np.cumsum(free) - 1                               # θ index -> free index
-    delta, C, Q = at_truth(problem, theta, free)
-    out = {"index": index, "dim": int(free.sum()), "Q": Q, "has_rho": any(n.startswith("rho_") for n in problem.names),
-           "z": [float(-delta[cols[i]] / np.sqrt(C[cols[i], cols[i]])) for i in idx]}
-    if fit:
+    out = {"index": index, "dim": int(free.sum()), "Q": None, "has_rho": any(n.startswith("rho_") for n in problem.names)}
+    if fit:                                                  # the least-squares optimum instead of the linear step
         ls = refine_least_squares(problem, theta, max_nfev=60, free=free)
         sd = np.sqrt(np.diag(ls.cov))
         out["z"] = [float((theta[i] - ls.theta[i]) / sd[i]) for i in idx]
         out["rho_hat"] = [float(v) for n, v in zip(problem.names, ls.theta) if n.startswith("rho_")]
+        return out
+    cols = np.cumsum(free) - 1                               # θ index -> free index
+    delta, C, out["Q"] = at_truth(problem, theta, free)
+    out["z"] = [float(-delta[cols[i]] / np.sqrt(C[cols[i], cols[i]])) for i in idx]
     return out
 
 
