@@ -2,31 +2,191 @@
 
 R-hat is computed across *ensembles* (each ensemble one chain, its walkers' draws pooled step by step,
 so split-R-hat splits in time); bulk ESS treats every walker as a chain (autocorrelation along steps).
-Both are ArviZ's rank-normalised estimators (Vehtari et al. 2021).
+Both are the rank-normalised estimators of Vehtari et al. (2021), written here as ArviZ 0.23 writes them
+(``az.rhat(method="rank")``, ``az.ess(method="bulk")``: the same ranks, back-transform, split, Geyer
+sequences and floors) but for every parameter at once: ArviZ loops over the parameters in Python through
+xarray, which took seconds per convergence check on the demo while the sampling processes waited. The
+tests compare both with ArviZ to 1e-10 (tests/test_diagnostics_mcmc.py); the report and summary.json
+still use ArviZ itself.
+
+    z = Φ⁻¹((r − 3/8) / (S + 1/4))              r: average rank among the S draws of the parameter
+    R̂ = √((B/W + n − 1) / n)                   W: mean within-chain variance, B: n × variance of chain means
+    R-hat = max(R̂(z of the split chains), R̂(z of |split − median|))
+    ESS = M·n / τ̂,  τ̂ = −1 + 2 Σ ρ̂_t         over Geyer's initial positive, then monotone, sequence
 """
 from __future__ import annotations
 
-import warnings
-
-import arviz as az
 import numpy as np
+import scipy.fft
+from scipy import special
+
+#: Blom's offset of the rank back-transform
+BLOM = 3 / 8
 
 
-def _dataset(x):
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # "more chains than draws" is intended here
-        return az.convert_to_dataset({"p": x})
+def _split(x: np.ndarray) -> np.ndarray:
+    """(p, 2m, ⌊n/2⌋) from (p, m, n): each chain's first and last halves (the middle draw of odd n dropped)."""
+    half = x.shape[2] // 2
+    return np.concatenate([x[:, :, :half], x[:, :, x.shape[2] - half:]], axis=1)
+
+
+def _average_ranks(flat: np.ndarray) -> np.ndarray:
+    """1-based ranks along the last axis of (p, S), ties given their average rank (``scipy.stats.rankdata``
+    with ``method="average"``, whose ``axis`` path loops in Python)."""
+    p, size = flat.shape
+    order = np.argsort(flat, axis=1)
+    ordered = np.take_along_axis(flat, order, axis=1)
+    new = np.ones((p, size), bool)
+    new[:, 1:] = ordered[:, 1:] != ordered[:, :-1]                 # first of a run of equal values
+    last = np.ones((p, size), bool)
+    last[:, :-1] = new[:, 1:]                                      # last of a run
+    idx = np.broadcast_to(np.arange(size), (p, size))
+    start = np.maximum.accumulate(np.where(new, idx, 0), axis=1)   # 0-based first index of the run
+    end = np.minimum.accumulate(np.where(last, idx, size - 1)[:, ::-1], axis=1)[:, ::-1]
+    ranks = np.empty((p, size))
+    np.put_along_axis(ranks, order, (start + end) / 2.0 + 1.0, axis=1)
+    return ranks
+
+
+def _z_scale(x: np.ndarray) -> np.ndarray:
+    """Normal scores of every parameter's pooled draws (average ranks for ties); x (p, m, n)."""
+    flat = x.reshape(x.shape[0], -1)
+    q = (_average_ranks(flat) - BLOM) / (flat.shape[1] - 2 * BLOM + 1)
+    return special.ndtri(q).reshape(x.shape)
+
+
+def _rhat(x: np.ndarray) -> np.ndarray:
+    """Potential scale reduction per parameter of x (p, m, n)."""
+    n = x.shape[2]
+    within = np.var(x, axis=2, ddof=1).mean(axis=1)
+    between = n * np.var(x.mean(axis=2), axis=1, ddof=1)
+    return np.sqrt((between / within + n - 1) / n)
+
+
+def _valid(x: np.ndarray, min_chains: int) -> np.ndarray:
+    """(p,) bool: finite and at least 4 draws and ``min_chains`` chains (ArviZ's conditions)."""
+    ok = np.all(np.isfinite(x.reshape(x.shape[0], -1)), axis=1)
+    return ok & (x.shape[2] >= 4) & (x.shape[1] >= min_chains)
+
+
+def rank_rhat(x: np.ndarray) -> np.ndarray:
+    """Rank-normalised split R-hat of every parameter.
+
+    Parameters
+    ----------
+    x : (p, n_chains, n_draws) array
+
+    Returns
+    -------
+    (p,) array
+        max(bulk, tail) R-hat; NaN where a parameter has non-finite draws, fewer than 2 chains or 4 draws.
+    """
+    out = np.full(x.shape[0], np.nan)
+    ok = _valid(x, 2)
+    if not ok.any():
+        return out
+    s = _split(x[ok])
+    folded = np.abs(s - np.median(s.reshape(s.shape[0], -1), axis=1)[:, None, None])
+    out[ok] = np.maximum(_rhat(_z_scale(s)), _rhat(_z_scale(folded)))
+    return out
+
+
+def _autocov(x: np.ndarray) -> np.ndarray:
+    """Autocovariance at every lag along the last axis (divided by n), zero-padded FFT."""
+    n = x.shape[-1]
+    m = scipy.fft.next_fast_len(2 * n)
+    f = scipy.fft.rfft(x - x.mean(axis=-1, keepdims=True), n=m, axis=-1)
+    return scipy.fft.irfft(f.real ** 2 + f.imag ** 2, n=m, axis=-1)[..., :n] / n
+
+
+def _geyer_ess(mean_acov: np.ndarray, var_plus: float, mean_var: float, size: int) -> float:
+    """ESS of one parameter from its chain-averaged autocovariance (ArviZ's ``_ess`` after the FFT)."""
+    n = mean_acov.size
+    rho = np.zeros(n)
+    rho_even = 1.0
+    rho[0] = rho_even
+    rho_odd = 1.0 - (mean_var - mean_acov[1]) / var_plus
+    rho[1] = rho_odd
+    t = 1
+    while t < n - 3 and rho_even + rho_odd > 0.0:          # Geyer's initial positive sequence
+        rho_even = 1.0 - (mean_var - mean_acov[t + 1]) / var_plus
+        rho_odd = 1.0 - (mean_var - mean_acov[t + 2]) / var_plus
+        if rho_even + rho_odd >= 0:
+            rho[t + 1] = rho_even
+            rho[t + 2] = rho_odd
+        t += 2
+    max_t = t - 2
+    if rho_even > 0:
+        rho[max_t + 1] = rho_even
+    t = 1
+    while t <= max_t - 2:                                   # Geyer's initial monotone sequence
+        if rho[t + 1] + rho[t + 2] > rho[t - 1] + rho[t]:
+            rho[t + 1] = (rho[t - 1] + rho[t]) / 2.0
+            rho[t + 2] = rho[t + 1]
+        t += 2
+    tau = -1.0 + 2.0 * np.sum(rho[: max_t + 1]) + np.sum(rho[max_t + 1: max_t + 2])
+    tau = max(tau, 1 / np.log10(size))
+    return float("nan") if np.isnan(rho).any() else size / tau
+
+
+def bulk_ess(x: np.ndarray) -> np.ndarray:
+    """Bulk effective sample size (rank-normalised split chains) of every parameter.
+
+    Parameters
+    ----------
+    x : (p, n_chains, n_draws) array
+
+    Returns
+    -------
+    (p,) array
+        ESS in draws; NaN where a parameter has non-finite draws or fewer than 4 draws.
+    """
+    out = np.full(x.shape[0], np.nan)
+    ok = np.flatnonzero(_valid(x, 1))
+    if ok.size == 0:
+        return out
+    z = _z_scale(_split(x[ok]))
+    m, n = z.shape[1:]
+    acov = _autocov(z)                                      # (p, m, n)
+    mean_var = acov[:, :, 0].mean(axis=1) * n / (n - 1.0)
+    var_plus = mean_var * (n - 1.0) / n
+    if m > 1:
+        var_plus = var_plus + np.var(z.mean(axis=2), axis=1, ddof=1)
+    mean_acov = acov.mean(axis=1)
+    flat = z.reshape(z.shape[0], -1)
+    constant = flat.max(axis=1) - flat.min(axis=1) < np.finfo(float).resolution
+    for j, i in enumerate(ok):
+        out[i] = m * n if constant[j] else _geyer_ess(mean_acov[j], var_plus[j], mean_var[j], m * n)
+    return out
 
 
 def rhat_across(chain: np.ndarray) -> np.ndarray:
+    """R-hat across ensembles (each ensemble one chain of its walkers' draws, step-major).
+
+    Parameters
+    ----------
+    chain : (n_ensembles, n_steps, n_walkers, dim) array
+
+    Returns
+    -------
+    (dim,) array
+    """
     n_ens, n_steps, n_w, dim = chain.shape
-    x = chain.reshape(n_ens, n_steps * n_w, dim)  # step-major: halves are early and late steps
-    ds = _dataset(x)
-    return np.asarray(az.rhat(ds, method="rank")["p"].values)
+    x = chain.reshape(n_ens, n_steps * n_w, dim)            # step-major: halves are early and late steps
+    return rank_rhat(np.moveaxis(x, 2, 0))
 
 
 def ess_bulk(chain: np.ndarray) -> np.ndarray:
+    """Bulk ESS with every walker of every ensemble as a chain.
+
+    Parameters
+    ----------
+    chain : (n_ensembles, n_steps, n_walkers, dim) array
+
+    Returns
+    -------
+    (dim,) array
+    """
     n_ens, n_steps, n_w, dim = chain.shape
     x = np.moveaxis(chain, 2, 1).reshape(n_ens * n_w, n_steps, dim)
-    ds = _dataset(x)
-    return np.asarray(az.ess(ds, method="bulk")["p"].values)
+    return bulk_ess(np.moveaxis(x, 2, 0))

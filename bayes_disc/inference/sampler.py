@@ -34,25 +34,29 @@
   share the posteriors stopped 5–19 % too narrow (tests/test_sample.py, the AR(1) importance-sampling
   test; the demo's lift and drag sds grew by up to 13 % at 0.8).
 * Stopping: R-hat across ensembles < ``rhat`` for every parameter, bulk ESS ≥ ``ess`` for every
-  coefficient (ArviZ, rank-normalised; walkers as chains, so walkers that have not mixed lower it),
-  and every chain ≥ ``n_tau`` · τ after burn-in (τ: emcee's integrated autocorrelation time,
-  reported with N/τ; emcee's walker-averaged τ ignores differences between walkers, which the ESS
-  catches, so the default n_tau is a floor of 10 rather than emcee's 50); or the ``max_steps`` cap.
+  coefficient (rank-normalised, computed as ArviZ does in :mod:`.diagnostics_mcmc`; walkers as chains,
+  so walkers that have not mixed lower it), and every chain ≥ ``n_tau`` · τ after burn-in (τ: emcee's
+  integrated autocorrelation time, reported with N/τ; emcee's walker-averaged τ ignores differences
+  between walkers, which the ESS catches, so the default n_tau is a floor of 10 rather than emcee's 50);
+  or the ``max_steps`` cap.
 """
 from __future__ import annotations
 
 import json
 import logging
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import emcee
 import numpy as np
+import scipy.fft
 
 from ..physics.parallel import mp_context
 from .backend import RoundBackend
 from .config import SamplerSettings
+from .diagnostics_mcmc import ess_bulk, rhat_across
 from .model import Problem
 from .moves import FlightBlockMove, SharedShift, block_factors
 from .proposals import CompositeProposal, Proposal
@@ -274,29 +278,56 @@ def _read(paths, blobs: bool = False, start: int = 0):
     return (chain, lp, acc, ss) if blobs else (chain, lp, acc)
 
 
-def _tau(chain: np.ndarray, c: float = 5.0) -> np.ndarray:
+#: most float64 values of one batch of FFTs in :func:`_tau` (bounds its memory: 2²⁴ values, 128 MB complex)
+TAU_BATCH_VALUES = 1 << 24
+
+
+def _tau(chain: np.ndarray, c: float = 5.0, workers: int = 1) -> np.ndarray:
     """Integrated autocorrelation time per parameter (steps): emcee's estimator (walker-averaged
     autocorrelation function, Sokal's automatic window c), skipping walkers that did not move in the
-    window (their autocorrelation is undefined; emcee would return NaN)."""
+    window (their autocorrelation is undefined; emcee would return NaN).
+
+    The autocorrelation functions are ``emcee.autocorr.function_1d``'s (the centred series' FFT, zero-padded
+    so that the circular correlation is the linear one, normalised at lag 0), computed for every walker and
+    parameter of a batch at once (at most :data:`TAU_BATCH_VALUES` transform values) with the shortest fast
+    padding ≥ 2·n_steps − 1 instead of emcee's 2·next power of two: the same numbers to rounding
+    (tests/test_sampler_tau.py), ≈ 10× faster on the demo's checks.
+
+    Parameters
+    ----------
+    chain : (n_steps, n_walkers, dim) array
+        One ensemble's steps.
+    c : float
+        Sokal's window constant.
+    workers : int
+        Threads of the FFTs (the convergence check runs while the sampling processes wait).
+
+    Returns
+    -------
+    (dim,) array
+        τ [steps]; inf for a parameter no walker moved in.
+    """
     n_steps, n_w, dim = chain.shape
+    n_fft = scipy.fft.next_fast_len(2 * n_steps - 1, real=True)
+    per = max(1, TAU_BATCH_VALUES // (n_fft * n_w))            # parameters per batch
     tau = np.empty(dim)
-    for d in range(dim):
-        f = np.zeros(n_steps)
-        used = 0
-        for k in range(n_w):
-            x = chain[:, k, d]
-            if np.ptp(x) > 0:
-                f += emcee.autocorr.function_1d(x)
-                used += 1
-        if used == 0:
-            tau[d] = np.inf
-            continue
-        taus = 2.0 * np.cumsum(f / used) - 1.0
-        tau[d] = taus[emcee.autocorr.auto_window(taus, c)]
+    for lo in range(0, dim, per):
+        x = np.moveaxis(chain[:, :, lo: lo + per], 0, -1)      # (n_w, p, n_steps): time contiguous
+        moved = np.ptp(x, axis=-1) > 0                         # (n_w, p)
+        x = x - x.mean(axis=-1, keepdims=True)
+        norm = np.sqrt(np.einsum("wpt,wpt->wp", x, x))         # √(lag-0 autocovariance · n_steps)
+        x /= np.where(moved, norm, 1.0)[..., None]             # unit lag 0: each walker's ACF is normalised
+        f = scipy.fft.rfft(x, n=n_fft, axis=-1, workers=workers)
+        power = np.einsum("wpk->pk", f.real ** 2 + f.imag ** 2)  # Σ over walkers: the transform is linear
+        acf = scipy.fft.irfft(power, n=n_fft, axis=-1, workers=workers)[:, :n_steps]
+        used = moved.sum(axis=0)                               # (p,)
+        taus = 2.0 * np.cumsum(acf / np.maximum(used, 1)[:, None], axis=-1) - 1.0
+        for j in range(x.shape[1]):
+            tau[lo + j] = np.inf if used[j] == 0 else taus[j, emcee.autocorr.auto_window(taus[j], c)]
     return tau
 
 
-#: parameters per block in the convergence statistics (ArviZ copies what it is given several times)
+#: parameters per block in the convergence statistics (bounds the rank and FFT work arrays)
 CHECK_BLOCK = 32
 
 
@@ -318,18 +349,20 @@ def convergence(chain: np.ndarray, settings: SamplerSettings, coef_idx: np.ndarr
     dict
         ``burn`` (absolute step: the warm-up and at least 5 τ after it, at most half of what follows it),
         ``tau`` (n_ens, dim), ``n_over_tau``, ``rhat_max``, ``ess_min_coef``, ``converged``. R-hat and ESS
-        are computed :data:`CHECK_BLOCK` parameters at a time, so memory stays near the chain's own.
+        are computed :data:`CHECK_BLOCK` parameters at a time (``settings.processes`` blocks at once, in
+        threads: the sampling processes wait during a check), so memory stays near the chain's own.
     """
-    from .diagnostics_mcmc import ess_bulk, rhat_across
     n_ens, n = chain.shape[:2]
-    tau0 = np.array([_tau(chain[e]) for e in range(n_ens)])
+    workers = max(1, settings.processes)
+    tau0 = np.array([_tau(chain[e], workers=workers) for e in range(n_ens)])
     skip = int(min(np.ceil(5 * np.nanmax(tau0)), n // 2))
     post = chain[:, skip:]
-    tau = np.array([_tau(post[e]) for e in range(n_ens)])
+    tau = np.array([_tau(post[e], workers=workers) for e in range(n_ens)])
     n_over_tau = (n - skip) / np.nanmax(tau)
     blocks = [slice(j, j + CHECK_BLOCK) for j in range(0, chain.shape[-1], CHECK_BLOCK)]
-    rh = np.concatenate([rhat_across(post[..., b]) for b in blocks])
-    ess = np.concatenate([ess_bulk(post[..., b]) for b in blocks])
+    with ThreadPoolExecutor(max_workers=workers) as threads:     # the sorts and FFTs release the GIL
+        rh = np.concatenate(list(threads.map(lambda b: rhat_across(post[..., b]), blocks)))
+        ess = np.concatenate(list(threads.map(lambda b: ess_bulk(post[..., b]), blocks)))
     ok = (first_step + n >= settings.min_steps and n_over_tau >= settings.n_tau and np.all(rh < settings.rhat)
           and np.all(ess[coef_idx] >= settings.ess))
     return {"burn": first_step + skip, "tau": tau, "n_over_tau": float(n_over_tau), "rhat_max": float(np.max(rh)),

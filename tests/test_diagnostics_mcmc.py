@@ -1,0 +1,61 @@
+"""The vectorised convergence statistics equal ArviZ's rank-normalised R-hat and bulk ESS."""
+import warnings
+
+import arviz as az
+import numpy as np
+import pytest
+
+from bayes_disc.inference.diagnostics_mcmc import bulk_ess, ess_bulk, rank_rhat, rhat_across
+
+
+def arviz(x: np.ndarray, what: str) -> np.ndarray:
+    """ArviZ on x (p, chains, draws), one variable per parameter."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ds = az.convert_to_dataset({f"v{i}": x[i] for i in range(x.shape[0])})
+        res = az.rhat(ds, method="rank") if what == "rhat" else az.ess(ds, method="bulk")
+    return np.array([float(res[f"v{i}"]) for i in range(x.shape[0])])
+
+
+def chains(p: int, m: int, n: int, seed: int) -> np.ndarray:
+    """AR(1) chains with different autocorrelations, a shifted chain, ties and a constant parameter."""
+    rng = np.random.default_rng(seed)
+    rho = np.linspace(0.0, 0.95, p)[:, None]
+    x = np.empty((p, m, n))
+    x[:, :, 0] = rng.standard_normal((p, m))
+    for t in range(1, n):
+        x[:, :, t] = rho * x[:, :, t - 1] + np.sqrt(1 - rho ** 2) * rng.standard_normal((p, m))
+    x[1, 0] += 2.0                                  # one chain off: R-hat > 1
+    x[2] = np.round(x[2], 1)                        # ties: average ranks
+    x[3] = 1.5                                      # constant
+    return x
+
+
+@pytest.mark.parametrize("m,n", [(4, 10), (4, 301), (16, 64), (1, 50), (3, 5)])
+def test_rank_rhat_and_bulk_ess_equal_arviz(m, n):
+    x = chains(6, m, n, m * 1000 + n)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")             # constant parameter: 0/0 in R-hat, as in ArviZ
+        rh = rank_rhat(x)
+    np.testing.assert_allclose(rh, arviz(x, "rhat"), rtol=1e-10, equal_nan=True)
+    np.testing.assert_allclose(bulk_ess(x), arviz(x, "ess"), rtol=1e-10, equal_nan=True)
+    if m > 1:
+        assert rh[1] > 1.05 and np.isnan(rh[3])
+    assert bulk_ess(x)[3] == (n // 2) * 2 * m       # constant: every draw counts
+
+
+def test_non_finite_draws_give_nan_like_arviz():
+    x = chains(5, 4, 40, 7)
+    x[0, 1, 5] = np.nan
+    assert np.isnan(rank_rhat(x)[0]) and np.isnan(bulk_ess(x)[0])
+    assert np.isfinite(rank_rhat(x)[[1, 2, 4]]).all() and np.isfinite(bulk_ess(x)[1:]).all()
+
+
+def test_ensemble_layout():
+    """rhat_across: ensembles are chains (walkers pooled step-major); ess_bulk: every walker a chain."""
+    rng = np.random.default_rng(3)
+    c = rng.standard_normal((3, 20, 8, 2)).cumsum(axis=1) * 0.1 + rng.standard_normal((3, 20, 8, 2))
+    pooled = np.moveaxis(c.reshape(3, 160, 2), 2, 0)
+    per_walker = np.moveaxis(np.moveaxis(c, 2, 1).reshape(24, 20, 2), 2, 0)
+    np.testing.assert_allclose(rhat_across(c), arviz(pooled, "rhat"), rtol=1e-10)
+    np.testing.assert_allclose(ess_bulk(c), arviz(per_walker, "ess"), rtol=1e-10)

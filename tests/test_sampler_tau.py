@@ -1,0 +1,61 @@
+"""The sampler's batched autocorrelation time equals emcee's estimator computed walker by walker."""
+import emcee
+import numpy as np
+import pytest
+
+from bayes_disc.inference import sampler
+from bayes_disc.inference.sampler import _tau
+
+
+def tau_walker_by_walker(chain: np.ndarray, c: float = 5.0) -> np.ndarray:
+    """emcee's function_1d per walker and parameter, averaged over the walkers that moved, Sokal's window."""
+    n_steps, n_w, dim = chain.shape
+    tau = np.empty(dim)
+    for d in range(dim):
+        f, used = np.zeros(n_steps), 0
+        for k in range(n_w):
+            if np.ptp(chain[:, k, d]) > 0:
+                f += emcee.autocorr.function_1d(chain[:, k, d])
+                used += 1
+        if used == 0:
+            tau[d] = np.inf
+            continue
+        taus = 2.0 * np.cumsum(f / used) - 1.0
+        tau[d] = taus[emcee.autocorr.auto_window(taus, c)]
+    return tau
+
+
+def ar1_chain(n_steps: int, n_w: int, dim: int, rho: float, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    e = rng.standard_normal((n_steps, n_w, dim))
+    x = np.empty_like(e)
+    x[0] = e[0] / np.sqrt(1 - rho ** 2)
+    for t in range(1, n_steps):
+        x[t] = rho * x[t - 1] + e[t]
+    return x
+
+
+@pytest.mark.parametrize("n_steps", [37, 150, 256, 301])
+def test_batched_tau_equals_emcee_walker_by_walker(n_steps):
+    x = ar1_chain(n_steps, 24, 7, 0.8, n_steps)
+    x[:, 3, 2] = 0.1                     # a walker stuck at a value whose mean is not exact in floating point
+    x[:, 5, 2] = 1 / 3
+    x[:, :, 4] = 2.0                     # no walker moved: τ undefined
+    ref = tau_walker_by_walker(x)
+    got = _tau(x)
+    assert np.array_equal(np.isinf(got), np.isinf(ref)) and np.isinf(got[4])
+    fin = np.isfinite(ref)
+    np.testing.assert_allclose(got[fin], ref[fin], rtol=1e-10)
+
+
+def test_batches_and_threads_do_not_change_tau(monkeypatch):
+    x = ar1_chain(200, 16, 9, 0.9, 1)
+    whole = _tau(x)
+    monkeypatch.setattr(sampler, "TAU_BATCH_VALUES", 1)   # one parameter per batch
+    np.testing.assert_allclose(_tau(x, workers=2), whole, rtol=1e-12)
+
+
+def test_tau_of_ar1_near_its_theory():
+    rho = 0.8                                              # integrated time (1 + ρ) / (1 − ρ) = 9
+    tau = _tau(ar1_chain(2000, 32, 3, rho, 2))
+    np.testing.assert_allclose(tau, (1 + rho) / (1 - rho), rtol=0.15)
