@@ -5,11 +5,12 @@ the ratio holds on a busy machine. The sampling processes wait during a check, s
 of every run. Prints the median seconds of each, their ratio and the largest difference between the two
 verdicts.
 
-    python benchmarks/bench_convergence.py [--run RUN_DIR] [--steps 200] [--repeats 5] [--json]
+    python benchmarks/bench_convergence.py [--run RUN_DIR] [--steps 200] [--walkers 118] [--dim 58]
+                                           [--repeats 5] [--json]
 
 ``--run``: the chains of a ``bayes-disc sample`` output folder (its steps after the warm-up, as the sampler's
 last check saw them); default: synthetic AR(1) chains of the demo's shape (4 ensembles × ``--steps`` ×
-118 walkers × 58 parameters, τ ≈ 10 steps).
+``--walkers`` 118 × ``--dim`` 58 parameters, τ ≈ 10 steps; 12 flights: 128 walkers × 154 parameters).
 """
 from __future__ import annotations
 
@@ -73,13 +74,13 @@ def reference_check(chain: np.ndarray, settings: SamplerSettings, coef_idx: np.n
             "ess_min_coef": float(np.min(ess[coef_idx]))}
 
 
-def synthetic(steps: int, seed: int = 0) -> np.ndarray:
+def synthetic(steps: int, walkers: int, dim: int, seed: int = 0) -> np.ndarray:
     rng = np.random.default_rng(seed)
     rho = 0.82                                                  # τ = (1 + ρ)/(1 − ρ) ≈ 10 steps
-    x = np.empty((4, steps, 118, 58))
-    x[:, 0] = rng.standard_normal((4, 118, 58))
+    x = np.empty((4, steps, walkers, dim))
+    x[:, 0] = rng.standard_normal((4, walkers, dim))
     for t in range(1, steps):
-        x[:, t] = rho * x[:, t - 1] + np.sqrt(1 - rho ** 2) * rng.standard_normal((4, 118, 58))
+        x[:, t] = rho * x[:, t - 1] + np.sqrt(1 - rho ** 2) * rng.standard_normal((4, walkers, dim))
     return x
 
 
@@ -87,6 +88,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--run", type=Path, help="a sample output folder (its chains/)")
     ap.add_argument("--steps", type=int, default=200, help="synthetic chains: steps after the warm-up")
+    ap.add_argument("--walkers", type=int, default=118, help="synthetic chains: walkers per ensemble")
+    ap.add_argument("--dim", type=int, default=58, help="synthetic chains: parameters")
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
@@ -98,7 +101,7 @@ def main(argv=None) -> int:
         chain = _read(chain_paths(a.run, settings.ensembles), start=first)[0]
         source = f"{a.run} (steps {first}–{first + chain.shape[1]})"
     else:
-        chain = synthetic(a.steps)
+        chain = synthetic(a.steps, a.walkers, a.dim)
         source = f"synthetic AR(1) chains {chain.shape}"
     coef_idx = np.arange(10)
     new_t, ref_t = [], []

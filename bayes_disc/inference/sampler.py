@@ -291,7 +291,7 @@ def _tau(chain: np.ndarray, c: float = 5.0, workers: int = 1) -> np.ndarray:
     so that the circular correlation is the linear one, normalised at lag 0), computed for every walker and
     parameter of a batch at once (at most :data:`TAU_BATCH_VALUES` transform values) with the shortest fast
     padding ≥ 2·n_steps − 1 instead of emcee's 2·next power of two: the same numbers to rounding
-    (tests/test_sampler_tau.py), ≈ 10× faster on the demo's checks.
+    (tests/test_sampler_tau.py), several times faster (``benchmarks/bench_convergence.py``).
 
     Parameters
     ----------
@@ -317,6 +317,7 @@ def _tau(chain: np.ndarray, c: float = 5.0, workers: int = 1) -> np.ndarray:
         x = x - x.mean(axis=-1, keepdims=True)
         norm = np.sqrt(np.einsum("wpt,wpt->wp", x, x))         # √(lag-0 autocovariance · n_steps)
         x /= np.where(moved, norm, 1.0)[..., None]             # unit lag 0: each walker's ACF is normalised
+        x[~moved] = 0.0                                        # a walker that stayed put has none
         f = scipy.fft.rfft(x, n=n_fft, axis=-1, workers=workers)
         power = np.einsum("wpk->pk", f.real ** 2 + f.imag ** 2)  # Σ over walkers: the transform is linear
         acf = scipy.fft.irfft(power, n=n_fft, axis=-1, workers=workers)[:, :n_steps]
@@ -327,8 +328,11 @@ def _tau(chain: np.ndarray, c: float = 5.0, workers: int = 1) -> np.ndarray:
     return tau
 
 
-#: parameters per block in the convergence statistics (bounds the rank and FFT work arrays)
+#: most parameters per block in the convergence statistics
 CHECK_BLOCK = 32
+#: most draws (ensembles × steps × walkers × parameters) per block: bounds the rank and FFT work arrays
+#: (≈ 10 arrays of this many values per block in flight; 2²² values: 32 MB each)
+CHECK_VALUES = 1 << 22
 
 
 def convergence(chain: np.ndarray, settings: SamplerSettings, coef_idx: np.ndarray, first_step: int = 0):
@@ -349,8 +353,9 @@ def convergence(chain: np.ndarray, settings: SamplerSettings, coef_idx: np.ndarr
     dict
         ``burn`` (absolute step: the warm-up and at least 5 τ after it, at most half of what follows it),
         ``tau`` (n_ens, dim), ``n_over_tau``, ``rhat_max``, ``ess_min_coef``, ``converged``. R-hat and ESS
-        are computed :data:`CHECK_BLOCK` parameters at a time (``settings.processes`` blocks at once, in
-        threads: the sampling processes wait during a check), so memory stays near the chain's own.
+        are computed in blocks of at most :data:`CHECK_BLOCK` parameters and :data:`CHECK_VALUES` draws
+        (``settings.processes`` blocks at once, in threads: the sampling processes wait during a check), so
+        memory stays bounded as the chains grow.
     """
     n_ens, n = chain.shape[:2]
     workers = max(1, settings.processes)
@@ -359,7 +364,8 @@ def convergence(chain: np.ndarray, settings: SamplerSettings, coef_idx: np.ndarr
     post = chain[:, skip:]
     tau = np.array([_tau(post[e], workers=workers) for e in range(n_ens)])
     n_over_tau = (n - skip) / np.nanmax(tau)
-    blocks = [slice(j, j + CHECK_BLOCK) for j in range(0, chain.shape[-1], CHECK_BLOCK)]
+    per = max(1, min(CHECK_BLOCK, CHECK_VALUES // post[..., 0].size))
+    blocks = [slice(j, j + per) for j in range(0, chain.shape[-1], per)]
     with ThreadPoolExecutor(max_workers=workers) as threads:     # the sorts and FFTs release the GIL
         rh = np.concatenate(list(threads.map(lambda b: rhat_across(post[..., b]), blocks)))
         ess = np.concatenate(list(threads.map(lambda b: ess_bulk(post[..., b]), blocks)))
