@@ -512,36 +512,3 @@ def test_first_screen_in_a_browser_shows_table_and_verdicts(tiny, tmp_path):
     assert r.returncode == 0 and shot.is_file(), r.stderr[-2000:]
     px = np.asarray(Image.open(shot).convert("L"), float)
     assert px.std() > 10 and (px < 128).mean() > 0.01, "first screen looks blank"
-
-
-def _line_figure():
-    from bayes_disc.report.figures import new_figure
-    fig = new_figure(3, 2)
-    ax = fig.add_subplot()
-    ax.plot(np.arange(50), np.sin(np.arange(50) / 5))
-    ax.set_title("background PDF")
-    return fig
-
-
-def test_background_pdf_equals_the_inline_one(tmp_path):
-    from bayes_disc.report.figures import PdfWriter, save_figure
-    fig = _line_figure()
-    inline = save_figure(fig, tmp_path / "a", "f", "caption")
-    with PdfWriter() as pdf:
-        bg = save_figure(fig, tmp_path / "b", "f", "caption", pdf=pdf)
-    assert bg.png == inline.png
-    strip = lambda b: re.sub(rb"/CreationDate \(D:[^)]*\)", b"", b)  # noqa: E731
-    assert strip(Path(bg.pdf_path).read_bytes()) == strip(Path(inline.pdf_path).read_bytes())
-
-
-def test_background_pdf_failure_is_raised(tmp_path):
-    from bayes_disc.report.figures import PdfWriter
-    fig = _line_figure()
-    with pytest.raises(OSError):
-        with PdfWriter() as pdf:
-            pdf.submit(fig, tmp_path / "missing_folder" / "f.pdf")
-    # an error in the report itself is not masked by the writer's
-    with pytest.raises(KeyError):
-        with PdfWriter() as pdf:
-            pdf.submit(fig, tmp_path / "missing_folder" / "f.pdf")
-            raise KeyError("section")

@@ -25,7 +25,7 @@ IC_LABELS = {"x": "x [m]", "y": "y [m]", "z": "z [m]", "vx": "vx [m/s]", "vy": "
 
 # ---------------------------------------------------------------------------------------------- helpers
 def _figure(ctx, fig, name: str, caption: str):
-    rf = F.save_figure(fig, ctx.figure_dir, name, caption, pdf=ctx.pdf)
+    rf = F.save_figure(fig, ctx.figure_dir, name, caption)
     ctx.figures_written.append(rf)
     return rf
 

@@ -11,15 +11,11 @@ import json
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import ReportInputError
 from .sections import ReportFigure
-
-if TYPE_CHECKING:
-    from .figures import PdfWriter
 
 #: posterior draws simulated for bands and predictive checks
 N_BAND_DRAWS = 150
@@ -154,9 +150,8 @@ class ReportContext:
     """A run plus lazily computed posterior draws and simulations; ``figure_dir`` receives PNG and PDF."""
 
     def __init__(self, run: RunData, figure_dir: Path, seed: int = 0, n_band_draws: int = N_BAND_DRAWS,
-                 n_corner_samples: int = N_CORNER_SAMPLES, pdf: PdfWriter | None = None):
+                 n_corner_samples: int = N_CORNER_SAMPLES):
         self.run = run
-        self.pdf = pdf                       # draws the figures' PDFs in the background (None: in line)
         self.n_corner_samples = int(n_corner_samples)
         self.summary = run.summary
         self.figure_dir = Path(figure_dir)

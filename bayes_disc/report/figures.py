@@ -1,21 +1,17 @@
 """Matplotlib figures of the report (object-oriented API on the Agg canvas: no pyplot state).
 
 Every function returns a :class:`matplotlib.figure.Figure`; :func:`save_figure` writes it as PNG and PDF
-and returns the PNG bytes for embedding. Drawing a PDF costs about as much as the PNG; with a
-:class:`PdfWriter` the PDFs are drawn in a background process while the report goes on.
+and returns the PNG bytes for embedding.
 """
 from __future__ import annotations
 
 import io
-import pickle
-from concurrent.futures import Future, ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from ..physics.parallel import mp_context
 from .sections import ReportFigure
 
 PNG_DPI = 90
@@ -33,51 +29,8 @@ def new_figure(width: float, height: float) -> Figure:
     return fig
 
 
-def _write_pdf(pickled_figure: bytes, path: str) -> str:
-    pickle.loads(pickled_figure).savefig(path, format="pdf")
-    return path
-
-
-class PdfWriter:
-    """Draws figures' PDF files in one background process (a context manager: leaving it waits for every
-    file and raises the first failure, so a report is complete or fails as without it).
-
-    Parameters
-    ----------
-    processes : int
-        Background processes (1: the report's own process draws the PNGs meanwhile).
-    """
-
-    def __init__(self, processes: int = 1):
-        self._pool = ProcessPoolExecutor(max_workers=processes, mp_context=mp_context())
-        self._jobs: list[Future] = []
-
-    def submit(self, fig: Figure, path: Path) -> None:
-        """Queue ``fig`` to be drawn to ``path`` (the figure is copied now: later changes do not count)."""
-        self._jobs.append(self._pool.submit(_write_pdf, pickle.dumps(fig), str(path)))
-
-    def close(self) -> None:
-        """Wait for every queued file; re-raise the first failure."""
-        try:
-            for job in self._jobs:
-                job.result()
-        finally:
-            self._pool.shutdown(cancel_futures=True)
-
-    def __enter__(self) -> "PdfWriter":
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> bool:
-        if exc_type is None:
-            self.close()
-        else:                                   # the report failed already: stop, do not mask its error
-            self._pool.shutdown(cancel_futures=True)
-        return False
-
-
-def save_figure(fig: Figure, folder: Path, name: str, caption: str, pdf: PdfWriter | None = None) -> ReportFigure:
-    """Write ``folder/name.png`` and ``folder/name.pdf`` (by ``pdf`` in the background if given); return the
-    embedded-figure record."""
+def save_figure(fig: Figure, folder: Path, name: str, caption: str) -> ReportFigure:
+    """Write ``folder/name.png`` and ``folder/name.pdf``; return the embedded-figure record."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     buf = io.BytesIO()
@@ -85,10 +38,7 @@ def save_figure(fig: Figure, folder: Path, name: str, caption: str, pdf: PdfWrit
     png = buf.getvalue()
     png_path, pdf_path = folder / f"{name}.png", folder / f"{name}.pdf"
     png_path.write_bytes(png)
-    if pdf is None:
-        fig.savefig(pdf_path, format="pdf")
-    else:
-        pdf.submit(fig, pdf_path)
+    fig.savefig(pdf_path, format="pdf")
     return ReportFigure(name=name, caption=caption, png=png, png_path=str(png_path), pdf_path=str(pdf_path))
 
 

@@ -8,7 +8,6 @@ from pathlib import Path
 
 from .builders import default_builders
 from .context import ReportContext, load_run
-from .figures import PdfWriter
 from .html import render_document
 from .sections import Section, SectionBuilder
 
@@ -75,8 +74,8 @@ def build_report(run_dir, reports_dir=Path("reports"), builders: list[SectionBui
     """
     t0 = time.perf_counter()
     run = load_run(run_dir)
-    with PdfWriter() as pdf, warnings.catch_warnings():
-        ctx = ReportContext(run, Path(run_dir) / "figures", seed=seed, pdf=pdf)
+    ctx = ReportContext(run, Path(run_dir) / "figures", seed=seed)
+    with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)     # all-NaN slices of failed lanes, NaN τ
         sections = build_sections(ctx, builders)
     name = run.summary["name"]
