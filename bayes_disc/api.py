@@ -48,17 +48,18 @@ def _read_json(path: Path, what: str) -> dict:
     return json.loads(path.read_text())
 
 
-def _build_report(run_dir: Path, path, seed: int) -> Path:
-    """The HTML report of ``run_dir`` at ``path`` (a ``.html`` file or a folder for ``<name>.html``)."""
+def _build_report(run_dir: Path, path, seed: int, processes: int) -> Path:
+    """The HTML report of ``run_dir`` at ``path`` (a ``.html`` file or a folder for ``<name>.html``), drawn in
+    ``processes`` worker processes."""
     from .report import build_report
     if path is None:
-        return build_report(run_dir, reports_dir=DEFAULT_REPORTS_DIR, seed=seed)
+        return build_report(run_dir, reports_dir=DEFAULT_REPORTS_DIR, seed=seed, processes=processes)
     target = Path(path)
     if target.suffix.lower() != ".html":
-        return build_report(run_dir, reports_dir=target, seed=seed)
+        return build_report(run_dir, reports_dir=target, seed=seed, processes=processes)
     target.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
-        built = build_report(run_dir, reports_dir=Path(tmp), seed=seed)
+        built = build_report(run_dir, reports_dir=Path(tmp), seed=seed, processes=processes)
         built.replace(target)
     return target
 
@@ -159,6 +160,7 @@ class SampleResult:
             working directory (as the command line).
         seed : int, optional
             Seed of the report's random draws; default the run's sampler seed (as the command line).
+            The figures are drawn in the run's ``processes`` worker processes.
 
         Returns
         -------
@@ -166,7 +168,7 @@ class SampleResult:
             The HTML file written.
         """
         seed = self.raw["sampler_settings"]["seed"] if seed is None else seed
-        return _build_report(self.output, path, int(seed))
+        return _build_report(self.output, path, int(seed), int(self.raw["sampler_settings"]["processes"]))
 
 
 @dataclass

@@ -45,9 +45,9 @@ def reports_dir(output=None) -> Path:
     return DEFAULT_REPORTS_DIR if output is None else Path(output) / RUN_REPORTS_DIR
 
 
-def _report(run_dir, reports: Path, seed: int) -> Path:
+def _report(run_dir, reports: Path, seed: int, processes: int) -> Path:
     with stage("report", f"HTML into {Path(reports)}/, figures into {Path(run_dir) / 'figures'}/"):
-        return build_report(run_dir, reports_dir=Path(reports), seed=seed)
+        return build_report(run_dir, reports_dir=Path(reports), seed=seed, processes=processes)
 
 
 @dataclass(frozen=True)
@@ -91,7 +91,7 @@ def sample(cfg: RunConfig, *, resume: bool = False, progress: bool = True, repor
     """
     logger.debug(f"sample: configuration {cfg.path}, output {cfg.output}")
     summary = run_sample(cfg, resume=resume, progress=progress)
-    path = _report(cfg.output, reports_dir, cfg.sampler.seed) if report else None
+    path = _report(cfg.output, reports_dir, cfg.sampler.seed, cfg.sampler.processes) if report else None
     return Outcome(summary, path)
 
 
@@ -150,7 +150,7 @@ def diagnose(cfg: RunConfig, *, sample: bool = True, processes: int = 2, progres
     path = None
     if report:
         if (out / "summary.json").is_file() and (out / "posterior.nc").is_file():
-            path = _report(out, reports_dir, cfg.sampler.seed)
+            path = _report(out, reports_dir, cfg.sampler.seed, cfg.sampler.processes)
         else:
             logger.info(f"no sampled run in {out}: run `bayes-disc sample {cfg.path}` for the HTML report "
                         "(it then includes this diagnosis)")

@@ -98,8 +98,12 @@ def tiny(tmp_path_factory):
         mp.chdir(d)  # `sample` may write reports/<name>.html in the working directory
         assert main(["sample", str(d / "config.yaml"), "--no-progress"]) == 0
     run_dir = d / "out"
-    html_path = build_report(run_dir, reports_dir=d / "reports")
-    return {"dir": d, "run": run_dir, "html": html_path, "text": html_path.read_text(encoding="utf-8")}
+    # the sample job drew its report's sections in two worker processes (the config's default processes: 2)
+    pooled = (d / "reports" / "tiny.html").read_text(encoding="utf-8")
+    pooled_png = {p.name: p.read_bytes() for p in sorted((run_dir / "figures").glob("*.png"))}
+    html_path = build_report(run_dir, reports_dir=d / "reports", processes=1, seed=5)  # the sampler's seed, as `sample`
+    return {"dir": d, "run": run_dir, "html": html_path, "text": html_path.read_text(encoding="utf-8"),
+            "pooled": pooled, "pooled_png": pooled_png}
 
 
 def test_report_written_where_expected(tiny):
@@ -372,6 +376,36 @@ def test_later_capabilities_slot_in_as_sections(tiny, tmp_path):
     assert len(default_builders()) == len(DEFAULT_SECTION_IDS)
     with pytest.raises(ValueError, match="duplicate"):
         build_sections(ctx, [extra, extra])
+
+
+def test_sections_drawn_in_worker_processes_equal_those_drawn_in_one(tiny):
+    """The same HTML (but for the build's duration and clock time) and byte-identical PNGs from two worker
+    processes as from one."""
+    def strip(text):
+        return re.sub(r"\d{4}-\d\d-\d\d \d\d:\d\d UTC", "", re.sub(r"Report built in [0-9.]+ s", "", text))
+    assert "Report built in" in tiny["pooled"]
+    assert strip(tiny["pooled"]) == strip(tiny["text"])
+    serial_png = {p.name: p.read_bytes() for p in sorted((tiny["run"] / "figures").glob("*.png"))}
+    assert sorted(serial_png) == sorted(f"{n}.png" for n in FIGURES)
+    assert serial_png == tiny["pooled_png"]
+
+
+def test_worker_sections_keep_order_figures_and_errors(tiny, tmp_path):
+    run = load_run(tiny["run"])
+    ctx = ReportContext(run, tmp_path / "figs")
+    from bayes_disc.report import content
+
+    def fails(c):
+        raise ReportInputError(c.run.run_dir / "summary.json", "a section's input is broken")
+    secs = build_sections(ctx, [content.coefficient_table, content.residual_section, content.force_curve_section],
+                          processes=2)
+    assert [s.id for s in secs] == ["coefficients", "residuals", "force-curves"]
+    assert [f.name for f in ctx.figures_written] == [f.name for s in secs for f in s.figures]
+    assert all(Path(f.png_path).is_file() and Path(f.pdf_path).is_file() for f in ctx.figures_written)
+    with pytest.raises(ReportInputError, match="summary.json: a section's input is broken"):
+        build_sections(ctx, [content.coefficient_table, fails], processes=2)
+    with pytest.raises(ValueError, match="processes must be ≥ 1"):
+        build_sections(ctx, [content.coefficient_table], processes=0)
 
 
 def test_identifiability_section_says_why_no_next_throw_was_ranked(tiny, tmp_path):

@@ -9,8 +9,12 @@ from .errors import ReportInputError
 
 def _report(args) -> int:
     from .run import build_report
+    if args.processes < 1:
+        print(f"bayes-disc report: --processes must be ≥ 1, got {args.processes}", file=sys.stderr)
+        return 2
     try:
-        build_report(args.run_dir, reports_dir=Path(args.reports_dir), seed=args.seed)   # logs the path written
+        build_report(args.run_dir, reports_dir=Path(args.reports_dir), seed=args.seed,
+                     processes=args.processes)   # logs the path written
     except ReportInputError as e:
         print(f"bayes-disc report: {e}", file=sys.stderr)
         return 2
@@ -33,4 +37,6 @@ def register(subparsers, parents=()) -> None:
     p.add_argument("run_dir", help="output folder of `bayes-disc sample` (holds summary.json, posterior.nc)")
     p.add_argument("--reports-dir", default="reports", help="folder for <name>.html (default: ./reports)")
     p.add_argument("--seed", type=int, default=0, help="seed for the posterior draws of bands (default 0)")
+    p.add_argument("--processes", type=int, default=2,
+                   help="worker processes drawing the figures (default 2; 1: none started)")
     p.set_defaults(func=_report)

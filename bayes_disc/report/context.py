@@ -351,6 +351,19 @@ class ReportContext:
             n_seen += seen
         return float(n_in / max(n_seen, 1))
 
+    def prepare(self) -> None:
+        """Compute the state several sections share (the rebuilt problem, the reference and band draws'
+        simulations, kinematics and predictive bands, the coefficients' chains), so that section builders
+        run in worker processes inherit it instead of each computing it again.
+
+        Raises
+        ------
+        ReportInputError
+            If the run's data can no longer be rebuilt (:attr:`problem`).
+        """
+        for name in ("problem", "coefficient_chains", "kinematics", "predictive"):     # cached properties
+            getattr(self, name)
+
     # -- truth ------------------------------------------------------------------------------------------
     @property
     def truth_coefficients(self) -> dict | None:
