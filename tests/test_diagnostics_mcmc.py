@@ -5,7 +5,8 @@ import arviz as az
 import numpy as np
 import pytest
 
-from bayes_disc.inference.diagnostics_mcmc import bulk_ess, ess_bulk, rank_rhat, rhat_across
+from bayes_disc.inference.diagnostics_mcmc import (SUMMARY_COLUMNS, bulk_ess, ess_bulk, rank_rhat, rhat_across,
+                                                   summary_diagnostics)
 
 
 def arviz(x: np.ndarray, what: str) -> np.ndarray:
@@ -59,3 +60,28 @@ def test_ensemble_layout():
     per_walker = np.moveaxis(np.moveaxis(c, 2, 1).reshape(24, 20, 2), 2, 0)
     np.testing.assert_allclose(rhat_across(c), arviz(pooled, "rhat"), rtol=1e-10)
     np.testing.assert_allclose(ess_bulk(c), arviz(per_walker, "ess"), rtol=1e-10)
+
+
+@pytest.mark.parametrize("m,n", [(4, 10), (4, 301), (16, 64), (1, 50), (3, 5)])
+def test_summary_diagnostics_equal_arviz_summary(m, n):
+    x = chains(6, m, n, m * 7 + n)
+    x[4] = np.exp(x[4])                             # skewed: mean and median, 5 % and 95 % tails differ
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ours = summary_diagnostics(x)
+        ds = az.convert_to_dataset({f"v{i}": x[i] for i in range(x.shape[0])})
+        ref = az.summary(ds, kind="diagnostics", round_to="none")
+    assert tuple(ref.columns) == SUMMARY_COLUMNS
+    for col in SUMMARY_COLUMNS:
+        np.testing.assert_allclose(ours[col], ref[col].to_numpy(float), rtol=1e-10, equal_nan=True, err_msg=col)
+    if m > 1:
+        assert ours["r_hat"][1] > 1.05
+    assert np.isnan(ours["r_hat"]).all() if m == 1 else np.isfinite(ours["r_hat"][[0, 1, 2, 4, 5]]).all()
+
+
+def test_summary_diagnostics_nan_for_non_finite_draws():
+    x = chains(4, 3, 30, 11)
+    x[0, 2, 7] = np.inf
+    out = summary_diagnostics(x)
+    assert all(np.isnan(out[c][0]) for c in SUMMARY_COLUMNS)
+    assert all(np.isfinite(out[c][[1, 2]]).all() for c in SUMMARY_COLUMNS)

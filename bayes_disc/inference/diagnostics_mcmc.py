@@ -6,8 +6,8 @@ Both are the rank-normalised estimators of Vehtari et al. (2021), written here a
 (``az.rhat(method="rank")``, ``az.ess(method="bulk")``: the same ranks, back-transform, split, Geyer
 sequences and floors) but for every parameter at once: ArviZ loops over the parameters in Python through
 xarray, which took seconds per convergence check on the demo while the sampling processes waited. The
-tests compare both with ArviZ to 1e-10 (tests/test_diagnostics_mcmc.py); the report and summary.json
-still use ArviZ itself.
+tests compare both with ArviZ to 1e-10 (tests/test_diagnostics_mcmc.py). :func:`summary_diagnostics` gives
+``az.summary(kind="diagnostics")``'s five columns the same way (summary.json's per-parameter diagnostics).
 
     z = Φ⁻¹((r − 3/8) / (S + 1/4))              r: average rank among the S draws of the parameter
     R̂ = √((B/W + n − 1) / n)                   W: mean within-chain variance, B: n × variance of chain means
@@ -129,6 +129,23 @@ def _geyer_ess(mean_acov: np.ndarray, var_plus: float, mean_var: float, size: in
     return float("nan") if np.isnan(rho).any() else size / tau
 
 
+def _ess(z: np.ndarray) -> np.ndarray:
+    """ESS of every parameter of z (p, m, n), chains as given (ArviZ's ``_ess``; z already split, finite)."""
+    out = np.empty(z.shape[0])
+    m, n = z.shape[1:]
+    acov = _autocov(z)                                      # (p, m, n)
+    mean_var = acov[:, :, 0].mean(axis=1) * n / (n - 1.0)
+    var_plus = mean_var * (n - 1.0) / n
+    if m > 1:
+        var_plus = var_plus + np.var(z.mean(axis=2), axis=1, ddof=1)
+    mean_acov = acov.mean(axis=1)
+    flat = z.reshape(z.shape[0], -1)
+    constant = flat.max(axis=1) - flat.min(axis=1) < np.finfo(float).resolution
+    for j in range(z.shape[0]):
+        out[j] = m * n if constant[j] else _geyer_ess(mean_acov[j], var_plus[j], mean_var[j], m * n)
+    return out
+
+
 def bulk_ess(x: np.ndarray) -> np.ndarray:
     """Bulk effective sample size (rank-normalised split chains) of every parameter.
 
@@ -142,21 +159,60 @@ def bulk_ess(x: np.ndarray) -> np.ndarray:
         ESS in draws; NaN where a parameter has non-finite draws or fewer than 4 draws.
     """
     out = np.full(x.shape[0], np.nan)
-    ok = np.flatnonzero(_valid(x, 1))
-    if ok.size == 0:
+    ok = _valid(x, 1)
+    if ok.any():
+        out[ok] = _ess(_z_scale(_split(x[ok])))
+    return out
+
+
+#: the columns of :func:`summary_diagnostics`, in ``az.summary(kind="diagnostics")``'s order
+SUMMARY_COLUMNS = ("mcse_mean", "mcse_sd", "ess_bulk", "ess_tail", "r_hat")
+
+
+def summary_diagnostics(x: np.ndarray) -> dict[str, np.ndarray]:
+    """``az.summary(kind="diagnostics")`` of every parameter at once (ArviZ 0.23's ``_multichain_statistics``).
+
+    With S = m·n draws of a parameter, x̄ their mean and s² = Σ(x − x̄)²/(S − 1):
+
+        mcse_mean = √(s² / ESS_mean)                     ESS_mean: ESS of the split chains
+        mcse_sd   = √(Var̂((x − x̄)²) / ESS_c2 / E[(x − x̄)²] / 4)   ESS_c2: of the split (x − x̄)²
+        ess_bulk  = ESS of the rank-normalised split chains
+        ess_tail  = min over q ∈ {5 %, 95 %} of the ESS of the split indicators 1{x ≤ quantile_q}
+        r_hat     = max(R̂(z of the split chains), R̂(z of the split |x − median(x)|))   (median of all draws)
+
+    Parameters
+    ----------
+    x : (p, n_chains, n_draws) array
+
+    Returns
+    -------
+    dict
+        :data:`SUMMARY_COLUMNS` → (p,) arrays; NaN where a parameter has non-finite draws or fewer than
+        4 draws, ``r_hat`` also NaN with one chain (as ArviZ).
+    """
+    p = x.shape[0]
+    out = {c: np.full(p, np.nan) for c in SUMMARY_COLUMNS}
+    ok = _valid(x, 1)
+    if not ok.any():
         return out
-    z = _z_scale(_split(x[ok]))
-    m, n = z.shape[1:]
-    acov = _autocov(z)                                      # (p, m, n)
-    mean_var = acov[:, :, 0].mean(axis=1) * n / (n - 1.0)
-    var_plus = mean_var * (n - 1.0) / n
-    if m > 1:
-        var_plus = var_plus + np.var(z.mean(axis=2), axis=1, ddof=1)
-    mean_acov = acov.mean(axis=1)
-    flat = z.reshape(z.shape[0], -1)
-    constant = flat.max(axis=1) - flat.min(axis=1) < np.finfo(float).resolution
-    for j, i in enumerate(ok):
-        out[i] = m * n if constant[j] else _geyer_ess(mean_acov[j], var_plus[j], mean_var[j], m * n)
+    y = x[ok]
+    flat = y.reshape(y.shape[0], -1)
+    size = flat.shape[1]
+    split = _split(y)
+    z_split = _z_scale(split)
+    lo, hi = np.quantile(flat, [0.05, 0.95], axis=1)           # type 7, as ArviZ's mquantiles(1, 1)
+    out["ess_tail"][ok] = np.minimum(_ess(_split((y <= lo[:, None, None]).astype(float))),
+                                     _ess(_split((y <= hi[:, None, None]).astype(float))))
+    if y.shape[1] >= 2:
+        folded = np.abs(y - np.median(flat, axis=1)[:, None, None])
+        out["r_hat"][ok] = np.maximum(_rhat(z_split), _rhat(_z_scale(_split(folded))))
+    c2 = (y - flat.mean(axis=1)[:, None, None]) ** 2
+    c2_sum = c2.reshape(c2.shape[0], -1).sum(axis=1)
+    out["mcse_mean"][ok] = np.sqrt(c2_sum / (size - 1) / _ess(split))
+    evar = c2_sum / size
+    varvar = ((c2 ** 2).reshape(c2.shape[0], -1).mean(axis=1) - evar ** 2) / _ess(_split(c2))
+    out["mcse_sd"][ok] = np.sqrt(varvar / evar / 4)
+    out["ess_bulk"][ok] = _ess(z_split)
     return out
 
 

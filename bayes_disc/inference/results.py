@@ -22,7 +22,8 @@ R-hat: ``summary.json``'s ``r_hat`` is the rank-normalised split R-hat with the 
 chains (walkers of an ensemble pooled step by step: the sampler's stopping rule), i.e.
 ``az.rhat(ensemble_view(idata))``. ``az.summary(idata)`` treats every *walker* as a chain and reports that
 walker-level R-hat, which summary.json records as ``r_hat_walkers``; ``ess_bulk``, ``ess_tail``,
-``mcse_mean`` and ``mcse_sd`` in summary.json are exactly ``az.summary(idata)``'s.
+``mcse_mean`` and ``mcse_sd`` in summary.json are ``az.summary(idata)``'s, computed for every parameter at once
+by :func:`.diagnostics_mcmc.summary_diagnostics` (ArviZ loops over the parameters through xarray).
 """
 from __future__ import annotations
 
@@ -37,13 +38,16 @@ import xarray as xr
 from ..physics import COEFFICIENT_NAMES, LITERATURE
 from ..observation.models import MarkerPositions
 from ..observation.models.inertial import InertialMeasurements
+from .diagnostics_mcmc import rank_rhat, summary_diagnostics
 from .layout import IC_NAMES
 from .model import Problem
+from .priors import coefficient_prior
+from .sampler import Chains
 
 #: the inertial channels, in the order of the models' predictions
 IMU_CHANNELS = ("gx", "gy", "gz", "ax", "ay", "az")
-from .priors import coefficient_prior
-from .sampler import Chains
+#: parameters summarised together (bounds the temporaries of the diagnostics: ~10 copies of the block's draws)
+SUMMARY_BLOCK = 16
 
 #: posterior.nc variables with a ``flight`` dimension for marker runs: the initial conditions and σ [m]
 FLIGHT_VARIABLES = IC_NAMES + ("sigma",)
@@ -236,25 +240,27 @@ def summarize(idata, names) -> dict:
         ``{name: {"mean", "sd", "q05", "q50", "q95", "q025", "q975", "r_hat", "r_hat_walkers", "ess_bulk",
         "ess_tail", "mcse_mean", "mcse_sd"}}`` in the parameter's unit (σ in m; ESS in samples). ``r_hat`` is
         across ensembles (``az.rhat(ensemble_view(idata.posterior))``); ``r_hat_walkers``, the ESS and the MCSE
-        are ``az.summary(idata, kind="diagnostics")``'s (walkers as chains).
+        are ``az.summary(idata, kind="diagnostics")``'s (walkers as chains), computed for every parameter at
+        once by :mod:`.diagnostics_mcmc` (equal to ArviZ's; tests/test_diagnostics_mcmc.py, tests/test_results.py).
     """
     post = idata.posterior
-    with _walkers_as_chains():
-        diag = az.summary(idata, kind="diagnostics", round_to="none")
-        rh = az.rhat(ensemble_view(post), method="rank")
+    by_ensemble = ensemble_view(post)
     params = {}
-    for name in names:
-        var, flight = _locate(post, name)
-        label = var if flight is None else f"{var}[{flight}]"
-        row = diag.loc[label]
-        r = rh[var] if flight is None else rh[var].sel(flight=flight)
-        values = posterior_draws(post, name).reshape(-1)
-        q025, q05, q50, q95, q975 = np.quantile(values, [0.025, 0.05, 0.5, 0.95, 0.975])
-        params[name] = {"mean": float(values.mean()), "sd": float(values.std(ddof=1)), "q05": float(q05),
-                        "q50": float(q50), "q95": float(q95), "q025": float(q025), "q975": float(q975),
-                        "r_hat": float(r), "r_hat_walkers": float(row["r_hat"]), "ess_bulk": float(row["ess_bulk"]),
-                        "ess_tail": float(row["ess_tail"]), "mcse_mean": float(row["mcse_mean"]),
-                        "mcse_sd": float(row["mcse_sd"])}
+    for start in range(0, len(names), SUMMARY_BLOCK):
+        block = names[start:start + SUMMARY_BLOCK]
+        x = np.stack([np.asarray(posterior_draws(post, n), float) for n in block])        # (p, walker, draw)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)                                 # 0/0 of a constant
+            diag = summary_diagnostics(x)
+            rh = rank_rhat(np.stack([np.asarray(posterior_draws(by_ensemble, n), float) for n in block]))
+        for i, name in enumerate(block):
+            values = x[i].reshape(-1)
+            q025, q05, q50, q95, q975 = np.quantile(values, [0.025, 0.05, 0.5, 0.95, 0.975])
+            params[name] = {"mean": float(values.mean()), "sd": float(values.std(ddof=1)), "q05": float(q05),
+                            "q50": float(q50), "q95": float(q95), "q025": float(q025), "q975": float(q975),
+                            "r_hat": float(rh[i]), "r_hat_walkers": float(diag["r_hat"][i]),
+                            "ess_bulk": float(diag["ess_bulk"][i]), "ess_tail": float(diag["ess_tail"][i]),
+                            "mcse_mean": float(diag["mcse_mean"][i]), "mcse_sd": float(diag["mcse_sd"][i])}
     return params
 
 
