@@ -16,7 +16,7 @@ Prints one line per flight count and a table of ratios to the 4-flight figures; 
 object. Peak memory is the process's maximum resident set (children included).
 
     python benchmarks/bench_scale.py [--flights 4 8 12 24] [--max-steps 3000] [--sampler "walkers: 64"]
-                                     [--no-dense] [--json]
+                                     [--no-dense] [--json] [--keep DIR]
 """
 from __future__ import annotations
 
@@ -140,9 +140,16 @@ def main(argv=None) -> int:
     ap.add_argument("--sampler", default="", help="extra sampler keys, e.g. 'block_fraction: 0, walkers: 64'")
     ap.add_argument("--no-dense", action="store_true", help="skip the dense-solver comparison")
     ap.add_argument("--json", action="store_true")
+    ap.add_argument("--keep", type=Path, default=None,
+                    help="keep every case's data, config and chains in this (new or empty) folder")
     args = ap.parse_args(argv)
     rows = []
-    with tempfile.TemporaryDirectory() as tmp:
+    if args.keep is not None:
+        args.keep.mkdir(parents=True, exist_ok=True)
+        if any(args.keep.iterdir()):
+            ap.error(f"--keep {args.keep}: folder not empty")
+    with tempfile.TemporaryDirectory() as scratch:
+        tmp = scratch if args.keep is None else args.keep
         for n in args.flights:
             sampler = ", ".join([f"max_steps: {args.max_steps}"] + ([args.sampler] if args.sampler else []))
             row = one_case(n, args.seed, sampler, not args.no_dense, Path(tmp))

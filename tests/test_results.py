@@ -16,7 +16,8 @@ from bayes_disc.inference.config import load_config
 from bayes_disc.inference.data import build_problem
 from bayes_disc.inference.diagnostics_mcmc import rhat_across
 from bayes_disc.inference.results import (build_inference_data, build_summary, compare_runs, ensemble_view,
-                                          load_posterior, pointwise_log_likelihood, posterior_draws, write_posterior)
+                                          load_posterior, pointwise_log_likelihood, posterior_draws, summarize,
+                                          summary_names, write_posterior, writing_posterior)
 from bayes_disc.inference.sampler import Chains
 from bayes_disc.inference.truth import truth_theta
 from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
@@ -96,6 +97,26 @@ def test_posterior_file_reads_back_as_written(base, folder):
     with h5py.File(folder / "out_base" / "posterior.nc", "r") as f:
         lp = f["sample_stats/lp"]
         assert lp.compression == "gzip" and lp.shuffle
+
+
+def test_posterior_written_beside_the_summary_in_a_child_process(base, folder, tmp_path):
+    """writing_posterior: the child writes the same file as the foreground writer while the body runs;
+    a failed child is an error, and the body's own error comes first."""
+    problem, _, idata, summary = base
+    with writing_posterior(idata, tmp_path / "posterior.nc", background=True):
+        params = summarize(idata, summary_names(problem), threads=2)
+    assert params == summary["parameters"]                      # threads: the same records as one thread
+    back, ref = load_posterior(tmp_path / "posterior.nc"), load_posterior(folder / "out_base" / "posterior.nc")
+    assert sorted(back.groups()) == sorted(ref.groups())
+    for g in ref.groups():
+        for name in getattr(ref, g).variables:
+            np.testing.assert_array_equal(getattr(back, g)[name].values, getattr(ref, g)[name].values)
+    with pytest.raises(RuntimeError, match="writing the posterior failed in its child process"):
+        with writing_posterior(idata, tmp_path / "no" / "such" / "folder.nc", background=True):
+            pass
+    with pytest.raises(KeyError, match="body"):
+        with writing_posterior(idata, tmp_path / "no" / "such" / "folder.nc", background=True):
+            raise KeyError("body")
 
 
 def test_posterior_has_flight_dimension_and_ensemble_walker_coords(base, folder):

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import contextlib
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import arviz as az
@@ -36,6 +37,7 @@ import numpy as np
 import xarray as xr
 
 from ..physics import COEFFICIENT_NAMES, LITERATURE
+from ..physics.parallel import mp_context
 from ..observation.models import MarkerPositions
 from ..observation.models.inertial import InertialMeasurements
 from .diagnostics_mcmc import rank_rhat, summary_diagnostics
@@ -224,7 +226,24 @@ def summary_names(problem: Problem) -> list[str]:
     return list(problem.names) + list(problem.sigma_names)
 
 
-def summarize(idata, names) -> dict:
+def _summary_block(post: xr.Dataset, by_ensemble: xr.Dataset, block: list[str]) -> dict:
+    """:func:`summarize`'s records of the parameters ``block``."""
+    x = np.stack([np.asarray(posterior_draws(post, n), float) for n in block])        # (p, walker, draw)
+    diag = summary_diagnostics(x)
+    rh = rank_rhat(np.stack([np.asarray(posterior_draws(by_ensemble, n), float) for n in block]))
+    params = {}
+    for i, name in enumerate(block):
+        values = x[i].reshape(-1)
+        q025, q05, q50, q95, q975 = np.quantile(values, [0.025, 0.05, 0.5, 0.95, 0.975])
+        params[name] = {"mean": float(values.mean()), "sd": float(values.std(ddof=1)), "q05": float(q05),
+                        "q50": float(q50), "q95": float(q95), "q025": float(q025), "q975": float(q975),
+                        "r_hat": float(rh[i]), "r_hat_walkers": float(diag["r_hat"][i]),
+                        "ess_bulk": float(diag["ess_bulk"][i]), "ess_tail": float(diag["ess_tail"][i]),
+                        "mcse_mean": float(diag["mcse_mean"][i]), "mcse_sd": float(diag["mcse_sd"][i])}
+    return params
+
+
+def summarize(idata, names, threads: int = 1) -> dict:
     """summary.json ``parameters`` records from posterior.nc's InferenceData.
 
     Parameters
@@ -233,6 +252,8 @@ def summarize(idata, names) -> dict:
         Built by :func:`build_inference_data` (posterior with ``ensemble``/``walker`` chain coordinates).
     names : list of str
         summary.json parameter names (:func:`summary_names`).
+    threads : int
+        Blocks of :data:`SUMMARY_BLOCK` parameters computed at once (the sorts and FFTs release the GIL).
 
     Returns
     -------
@@ -245,22 +266,13 @@ def summarize(idata, names) -> dict:
     """
     post = idata.posterior
     by_ensemble = ensemble_view(post)
+    blocks = [list(names[j:j + SUMMARY_BLOCK]) for j in range(0, len(names), SUMMARY_BLOCK)]
     params = {}
-    for start in range(0, len(names), SUMMARY_BLOCK):
-        block = names[start:start + SUMMARY_BLOCK]
-        x = np.stack([np.asarray(posterior_draws(post, n), float) for n in block])        # (p, walker, draw)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)                                 # 0/0 of a constant
-            diag = summary_diagnostics(x)
-            rh = rank_rhat(np.stack([np.asarray(posterior_draws(by_ensemble, n), float) for n in block]))
-        for i, name in enumerate(block):
-            values = x[i].reshape(-1)
-            q025, q05, q50, q95, q975 = np.quantile(values, [0.025, 0.05, 0.5, 0.95, 0.975])
-            params[name] = {"mean": float(values.mean()), "sd": float(values.std(ddof=1)), "q05": float(q05),
-                            "q50": float(q50), "q95": float(q95), "q025": float(q025), "q975": float(q975),
-                            "r_hat": float(rh[i]), "r_hat_walkers": float(diag["r_hat"][i]),
-                            "ess_bulk": float(diag["ess_bulk"][i]), "ess_tail": float(diag["ess_tail"][i]),
-                            "mcse_mean": float(diag["mcse_mean"][i]), "mcse_sd": float(diag["mcse_sd"][i])}
+    with warnings.catch_warnings():                        # (the filter is process-wide: set around the threads)
+        warnings.simplefilter("ignore", RuntimeWarning)    # 0/0 of a constant parameter
+        with ThreadPoolExecutor(max_workers=max(1, threads)) as pool:
+            for part in pool.map(lambda b: _summary_block(post, by_ensemble, b), blocks):
+                params.update(part)
     return params
 
 
@@ -268,9 +280,10 @@ def literature_table() -> dict:
     return {k: dict(s.values) for k, s in LITERATURE.items()}
 
 
-def build_summary(problem: Problem, chains: Chains, idata, ls_dict: dict, cfg_info: dict) -> dict:
-    """summary.json (SPEC §6) of a run: parameter records (:func:`summarize`), convergence, literature."""
-    params = summarize(idata, summary_names(problem))
+def build_summary(problem: Problem, chains: Chains, idata, ls_dict: dict, cfg_info: dict, threads: int = 1) -> dict:
+    """summary.json (SPEC §6) of a run: parameter records (:func:`summarize`, in ``threads`` threads),
+    convergence, literature."""
+    params = summarize(idata, summary_names(problem), threads)
     coef = list(COEFFICIENT_NAMES) + problem.ext_names
     tau = np.nanmax(chains.tau, axis=0)
     return {
@@ -569,20 +582,65 @@ def write_posterior(idata: az.InferenceData, path) -> None:
         mode = "a"
 
 
-def load_posterior(path) -> az.InferenceData:
+@contextlib.contextmanager
+def writing_posterior(idata: az.InferenceData, path, background: bool):
+    """Write ``posterior.nc`` (:func:`write_posterior`) while the body of the ``with`` runs: in a child process
+    when ``background`` (compressing the file takes seconds that the summary can use on another core), else
+    here before the body. Leaving the block waits for the file.
+
+    Parameters
+    ----------
+    idata : arviz.InferenceData
+    path : str or Path
+    background : bool
+        Write in a child process (:func:`~bayes_disc.physics.parallel.mp_context`); False where no child
+        may be started (``processes: 1``, e.g. a run inside a Dask worker).
+
+    Raises
+    ------
+    RuntimeError
+        If the child process failed (its traceback is on stderr); an error of the body takes precedence.
+    """
+    if not background:
+        write_posterior(idata, path)
+        yield
+        return
+    child = mp_context().Process(target=write_posterior, args=(idata, str(path)), name="posterior.nc writer")
+    child.start()
+    try:
+        yield
+    finally:
+        child.join()
+    if child.exitcode != 0:
+        raise RuntimeError(f"{path}: writing the posterior failed in its child process (exit code {child.exitcode})")
+
+
+def load_posterior(path, groups: tuple[str, ...] | None = None) -> az.InferenceData:
     """Read a posterior.nc into memory (the file is closed afterwards, so a later run can rewrite it).
 
     Parameters
     ----------
     path : str or Path
         A posterior.nc written by ``bayes-disc sample``.
+    groups : tuple of str, optional
+        Read only these groups (those the file has; the report needs ``posterior`` and ``sample_stats``, a
+        third of the demo's file); default every group, as ``az.from_netcdf``.
 
     Returns
     -------
     arviz.InferenceData
     """
-    with az.rc_context({"data.load": "eager"}):
-        return az.from_netcdf(str(path))
+    if groups is None:
+        with az.rc_context({"data.load": "eager"}):
+            return az.from_netcdf(str(path))
+    import h5py
+    with h5py.File(str(path), "r") as f:
+        present = [g for g in groups if g in f]
+    data = {}
+    for g in present:
+        with xr.open_dataset(str(path), group=g, engine="h5netcdf") as ds:
+            data[g] = ds.load()
+    return az.InferenceData(**data)
 
 
 def run_label(run_dir) -> str:

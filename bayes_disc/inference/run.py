@@ -33,7 +33,7 @@ from ..observation.models import MarkerPositions
 from .data import build_problem
 from .inertial import load_run_throws
 from .leastsq import fit_least_squares
-from .results import build_inference_data, build_summary, format_table, prior_record, write_posterior
+from .results import build_inference_data, build_summary, format_table, prior_record, writing_posterior
 from .profile import profile_paths
 from .robust import (FLAGGED, gross_error_advice, robust_flights, robust_refit, suspected_gross_errors,
                      with_saved_flags)
@@ -421,9 +421,9 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
         if throws:
             info["inertial_throws"] = {t.name: t.to_dict() for t in throws}
         idata = build_inference_data(problem, chains, np.random.default_rng(cfg.sampler.seed))
-        summary = build_summary(problem, chains, idata, ls_dict, info)
-        (out / "summary.json").write_text(json.dumps(summary, indent=1))
-        write_posterior(idata, out / "posterior.nc")
+        with writing_posterior(idata, out / "posterior.nc", background=cfg.sampler.processes > 1):
+            summary = build_summary(problem, chains, idata, ls_dict, info, threads=cfg.sampler.processes)
+            (out / "summary.json").write_text(json.dumps(summary, indent=1))
         previous = out / "run_info.json"
         sessions = json.loads(previous.read_text()).get("sessions", []) if steps is not None and previous.is_file() else []
         session = {"resumed_from_steps": steps, "total_steps": chains.total_steps,

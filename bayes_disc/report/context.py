@@ -88,7 +88,7 @@ def load_run(run_dir) -> RunData:
     from ..inference.results import has_parameter, load_posterior
     try:
         # eager: a lazily opened file would stay open and block the next `sample` from rewriting it
-        idata = load_posterior(pp)
+        idata = load_posterior(pp, groups=("posterior", "sample_stats"))     # all the report reads
     except Exception as e:  # netCDF/HDF errors come in many types
         raise ReportInputError(pp, f"cannot read as ArviZ InferenceData ({type(e).__name__}: {e})") from None
     if "posterior" not in idata.groups():
