@@ -33,6 +33,7 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import arviz as az
+import h5py
 import numpy as np
 import xarray as xr
 
@@ -633,7 +634,6 @@ def load_posterior(path, groups: tuple[str, ...] | None = None) -> az.InferenceD
     if groups is None:
         with az.rc_context({"data.load": "eager"}):
             return az.from_netcdf(str(path))
-    import h5py
     with h5py.File(str(path), "r") as f:
         present = [g for g in groups if g in f]
     data = {}
