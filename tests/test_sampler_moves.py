@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
 
-from bayes_disc.inference.proposals import MixtureProposal, Proposal
+from bayes_disc.inference.proposals import MixtureProposal
 
 
 def _mixture():
@@ -29,10 +29,10 @@ def test_mixture_draws_have_its_moments():
     np.testing.assert_allclose(np.cov(x.T), cov, atol=0.03)
 
 
-@pytest.mark.parametrize("kind", ["mixture", "pcn"])
-def test_moves_leave_the_target_invariant(kind):
-    """An emcee run with only that move on a correlated Gaussian target whose shape differs from the
-    proposal's recovers the target's mean and covariance (a wrong acceptance ratio biases them)."""
+def test_mixture_jumps_leave_the_target_invariant():
+    """An emcee run with only independence jumps from a Gaussian mixture on a correlated Gaussian target
+    whose shape differs from the proposal's recovers the target's mean and covariance (a wrong acceptance
+    ratio biases them)."""
     m = np.array([1.0, -0.5])
     S = np.array([[0.5, 0.3], [0.3, 0.4]])
     Si = np.linalg.inv(S)
@@ -41,11 +41,8 @@ def test_moves_leave_the_target_invariant(kind):
         d = x - m
         return -0.5 * np.einsum("ni,ij,nj->n", d, Si, d)
 
-    if kind == "mixture":
-        move = MixtureProposal.from_components([np.zeros(2), np.array([1.5, 0.0])], [np.eye(2), 0.5 * np.eye(2)],
-                                               np.log([0.5, 0.5]))
-    else:
-        move = Proposal.from_cov(np.zeros(2), np.eye(2)).with_rho(0.8)
+    move = MixtureProposal.from_components([np.zeros(2), np.array([1.5, 0.0])], [np.eye(2), 0.5 * np.eye(2)],
+                                           np.log([0.5, 0.5]))
     sampler = emcee.EnsembleSampler(32, 2, log_prob, vectorize=True, moves=[emcee.moves.MHMove(move)])
     sampler.random_state = np.random.RandomState(3).get_state()
     p0 = np.random.default_rng(4).normal(size=(32, 2))

@@ -12,7 +12,7 @@ sampler:                 # emcee settings
   n_tau: 10              # stop when every chain is ≥ n_tau · τ long (τ: emcee's estimator) ...
   rhat: 1.01             # ... R-hat across ensembles is below this ...
   ess: 400               # ... and every coefficient's bulk ESS reaches this
-  independence_fraction: 0.8   # share of the independence (ridge-aware) and pCN moves (rest: DE moves)
+  independence_fraction: 0.8   # share of the independence (ridge-aware) jumps (rest: DE moves)
   block_fraction: 0.3    # share of the flight-block moves (Gibbs sweeps over flights, shared shifts),
                          # used when the walkers are fewer than 2·dim + 2; 0 = never
   adapt_steps: 75        # warm-up: the proposals are re-fitted after 75 and 150 steps

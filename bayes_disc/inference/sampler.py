@@ -18,12 +18,10 @@
     ridge proposal along every profile-likelihood path (:mod:`.profile`) that departs from it. A weakly
     identified combination (the demo's CM0 and CMq with the flights' wobble initial conditions) makes
     a thin curved valley that a Gaussian cannot cover and that local moves cross only over thousands
-    of steps; the ridge proposals follow the valley, so the jumps reach all of it;
-  - preconditioned Crank–Nicolson steps on a Gaussian reference N(μ, Σ): first the moments of the
-    independence proposal;
-  - both are re-fitted to the pooled ensembles' samples twice during warm-up (after ``adapt_steps`` and
-    2·``adapt_steps`` steps: the reference's mean and covariance, the independence proposal's weights);
-    they are fixed afterwards and the warm-up is discarded as burn-in;
+    of steps; the ridge proposals follow the valley, so the jumps reach all of it. They are the whole
+    Metropolis–Hastings share: the independence proposal's weights and the Gaussian reference (the block
+    moves' shape) are re-fitted to the pooled ensembles' samples twice during warm-up (after
+    ``adapt_steps`` and 2·``adapt_steps`` steps), fixed afterwards, and the warm-up is discarded as burn-in;
   - emcee's DE moves, mostly with γ scaled down (local steps accepted often), some at the default γ,
     and snooker moves.
   The Metropolis–Hastings moves have the larger share (``independence_fraction``, default 0.8): their
@@ -63,13 +61,17 @@ from .proposals import CompositeProposal, Proposal
 
 logger = logging.getLogger(__name__)
 
-#: re-fits of the pCN reference during warm-up
+#: re-fits of the Gaussian reference (and of the independence proposal's weights) during warm-up
 ADAPTATIONS = 2
 
-#: Within the Metropolis–Hastings share: independence jumps and long pCN steps. Measured on the demo
-#: posterior (a curved valley) after warm-up: independence jumps accepted 17 % of the time (the CMq
-#: ridge part, weight 0.8, 19 %) and they cross the whole valley; pCN with ρ = 0.97 3 %, ρ ≤ 0.9 ≤ 1 %.
-MH_MIX = ((None, 0.5), (0.97, 0.5))
+#: The Metropolis–Hastings share is all independence jumps. Preconditioned Crank–Nicolson steps (ρ = 0.97)
+#: on the Gaussian reference had half of it until stop 31; measured from stationary walkers of
+#: benchmarks/bench_scale.py's kept runs (scratch harness: acceptance and mean squared jump in posterior
+#: sds per move), they were accepted 0.7 % (4 flights), 0.3 % (12) and 0.0 % (24) of the time and moved the
+#: coefficients by 0.005 sd² per proposal, against 10 %, 10 % and 3 % and 1.7, 1.9 and 0.6 sd² for the
+#: independence jumps (the posterior's curved valley is not the Gaussian the pCN steps are reversible for).
+#: With that share given to the independence jumps, τ fell from 17.5 to 8 steps at 4 flights and from 27 to
+#: 11 at 12 (bench_scale.py, same data).
 #: Within the DE share: emcee's DE move with γ scaled down (accepted ~30 % on the demo posterior,
 #: against ~4 % for the default γ = 2.38/√(2·dim)), the default DE move and the snooker move.
 DE_SCALE = 0.35
@@ -93,7 +95,7 @@ def _moves(problem: Problem, proposal: Proposal, independence: CompositeProposal
            block_fraction: float = 0.0, walkers: int | None = None):
     """emcee's (move, weight) list: a ``block_fraction`` share of block moves (when :func:`uses_block_moves`;
     ``walkers`` None: whenever enabled), then of the rest a ``fraction`` share of Metropolis–Hastings moves
-    (independence jumps, pCN) and DE moves. With fewer than 2·dim ``walkers`` (block moves on), the DE moves
+    (independence jumps) and DE moves. With fewer than 2·dim ``walkers`` (block moves on), the DE moves
     propose within the walkers' span only: still exact, so emcee's guard against them is lifted
     (``live_dangerously``)."""
     dangerous = walkers is not None and walkers < 2 * problem.dim
@@ -101,16 +103,14 @@ def _moves(problem: Problem, proposal: Proposal, independence: CompositeProposal
         block_fraction = 0.0
     moves = []
     if block_fraction > 0:
-        conditional, shared, regression = block_factors(problem, proposal.chol @ proposal.chol.T)
+        conditional, shared, regression = block_factors(problem, proposal.cov)
         for kind, share in BLOCK_MIX:
             move = (FlightBlockMove(problem, conditional) if kind == "gibbs"
                     else emcee.moves.MHMove(SharedShift(shared, regression)))
             moves.append((move, block_fraction * share))
     rest = 1.0 - block_fraction
     if fraction > 0:
-        for rho, share in MH_MIX:
-            move = independence if rho is None else proposal.with_rho(rho)
-            moves.append((emcee.moves.MHMove(move), rest * fraction * share))
+        moves.append((emcee.moves.MHMove(independence), rest * fraction))
     if fraction < 1:
         g0 = 2.38 / np.sqrt(2 * problem.dim)
         for kind, share in DE_MIX:
@@ -509,7 +509,7 @@ def saved_steps(out_dir: Path, ensembles: int) -> list[int] | None:
 
 
 def _fresh_start(independence: CompositeProposal, settings: SamplerSettings, problem: Problem, nw: int):
-    """The pCN reference and every ensemble's initial walkers, drawn in a fixed order from the seed (so
+    """The Gaussian reference and every ensemble's initial walkers, drawn in a fixed order from the seed (so
     a resume can redraw the start of an ensemble that never saved a step)."""
     rng = np.random.default_rng(settings.seed)
     proposal = Proposal.from_cov(*independence.moments(np.random.RandomState(rng.integers(2**32))))
