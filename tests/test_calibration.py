@@ -307,3 +307,49 @@ def test_replicate_problem_is_what_the_replicates_fit_builds():
     sigma = np.array([result.truth["flights"][f.name]["noise_m"] for f in problem.flights])
     ms = [np.mean(r ** 2) for r in flight_residuals(theta, problem, sigma)]
     assert np.allclose(ms, 1 - 0.85 ** 2, atol=0.06), ms        # ~900 residuals a flight: sd ≈ 0.013
+
+
+def test_outside_probability_and_familywise_band_match_simulated_campaigns():
+    """Simulated campaigns of K = 20 calibrated coverage counts (N = 100, levels 0.5 and 0.9): the fraction of
+    counts outside their own 95 % band equals Σ outside_probability / K, and the fraction of campaigns with
+    every count inside the family-wise band is ≥ 95 % (and the family-wise band is wider than the single one)."""
+    from bayes_disc.calibration.stats import familywise_mass, outside_probability
+    rng = np.random.default_rng(11)
+    n, campaigns = 100, 20_000
+    levels = np.repeat([0.5, 0.9], 10)
+    counts = rng.binomial(n, levels, size=(campaigns, levels.size)) / n
+    single = np.array([binomial_band(n, p) for p in levels])
+    family = np.array([binomial_band(n, p, familywise_mass(levels.size)) for p in levels])
+    outside = (counts < single[:, 0]) | (counts > single[:, 1])
+    expected = np.mean([outside_probability(n, p) for p in levels])
+    assert outside.mean() == pytest.approx(expected, abs=4 * np.sqrt(expected / outside.size))
+    assert 0 < expected <= 0.05
+    all_inside = np.all((counts >= family[:, 0]) & (counts <= family[:, 1]), axis=1).mean()
+    assert all_inside >= 0.95 - 3 * np.sqrt(0.05 * 0.95 / campaigns)
+    assert np.all(family[:, 0] <= single[:, 0]) and np.all(family[:, 1] >= single[:, 1])
+    res = summarize(_conjugate_replicates(100, 19, rng), ["t"], 19, bins=10)
+    assert res["coverage_outside_expected"] == pytest.approx(outside_probability(100, 0.5) + outside_probability(100, 0.9))
+    assert res["coverage_band_familywise_95"]["90"] == list(binomial_band(100, 0.9, familywise_mass(2)))
+
+
+def test_calibration_page_counts_coverages_outside_their_bands(tmp_path):
+    """The page says how many coverages fall outside their own band and which are inside the family-wise one:
+    a 90 % coverage of 0.83 at N = 100 (band 0.84–0.95, family-wise 0.80–0.98 for K = 4) is 'NO', 'yes'."""
+    from bayes_disc.report.calibration import build_calibration_page
+    rng = np.random.default_rng(12)
+    recs = _conjugate_replicates(100, 19, rng)
+    for r in recs:                                     # a second coefficient, a copy of the first
+        for key in ("ranks", "truth", "posterior"):
+            r[key]["u"] = r[key]["t"]
+        for lv in ("50", "90"):
+            r["covered"][lv]["u"] = r["covered"][lv]["t"]
+    res = summarize(recs, ["t", "u"], 19, bins=10)
+    res["coefficients"]["u"]["coverage_90"] = 0.83
+    for lv in ("50", "90"):
+        res["coefficients"]["t"][f"coverage_{lv}"] = float(lv) / 100
+    res["coefficients"]["u"]["coverage_50"] = 0.5
+    html = build_calibration_page(res, tmp_path / "c.html").read_text()
+    assert "1 of the 4 coverages fall outside their own 95 % band" in html
+    row = re.search(r"<tr><td>u</td>(.*?)</tr>", html).group(1)
+    cells = re.findall(r"<td>(.*?)</td>", row)
+    assert cells[:6] == ["0.5", "yes", "yes", "0.83", "NO", "yes"], cells

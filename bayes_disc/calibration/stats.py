@@ -10,6 +10,14 @@ Coverage: the central 100·c % interval of the posterior draws [q_{(1−c)/2}, q
 fraction of the replicates; calibrated inference covers with probability c, so over N replicates the count
 is Binomial(N, c) and its central 95 % range (:func:`binomial_band`) is where an honest coverage falls.
 
+Many coverages at once: a campaign counts K = (coefficients × levels) coverages, and each falls outside its
+own 95 % band with probability α_k ≤ 0.05 (the band's exact outside mass, :func:`outside_probability`) even
+for calibrated intervals — for K = 20 about one of them is expected outside (Σ α_k), and all 20 inside only
+with probability ≈ Π (1 − α_k). The family-wise band (:func:`familywise_mass`, Bonferroni) is the central
+range of mass 1 − 0.05/K: calibrated intervals put every one of the K coverages inside it with probability
+≥ 95 %. Both are reported; a coverage outside its own band but inside the family-wise one is what chance
+gives about once per campaign, one outside the family-wise band is evidence against calibration.
+
 Posterior draws of MCMC are autocorrelated: :func:`thinned_draws` keeps every ⌈τ⌉-th step of every chain
 (τ: integrated autocorrelation time in steps) before choosing the L draws, so that they are close to
 independent; otherwise the rank histogram is ∪-shaped even for a correct posterior.
@@ -188,6 +196,36 @@ def binomial_band(n: int, p: float, mass: float = BAND_MASS) -> tuple[float, flo
     return float(lo / n), float(hi / n)
 
 
+def outside_probability(n: int, p: float, mass: float = BAND_MASS) -> float:
+    """Probability that a Binomial(n, p) count falls outside its central ``mass`` range (:func:`binomial_band`):
+    ≤ 1 − ``mass`` (the range is discrete, so usually less); NaN for n = 0.
+
+    Parameters
+    ----------
+    n : int
+        Trials (replicates).
+    p : float
+        Success probability (nominal coverage).
+    mass : float
+        Probability mass of the range.
+
+    Returns
+    -------
+    float
+    """
+    if n == 0:
+        return float("nan")
+    lo, hi = binomial_band(n, p, mass)
+    inside = stats.binom.cdf(round(hi * n), n, p) - stats.binom.cdf(round(lo * n) - 1, n, p)
+    return float(1.0 - inside)
+
+
+def familywise_mass(k: int, mass: float = BAND_MASS) -> float:
+    """Per-coverage mass 1 − (1 − ``mass``)/k of the Bonferroni band: k calibrated coverages all fall inside
+    their bands with probability ≥ ``mass``."""
+    return 1.0 - (1.0 - mass) / max(k, 1)
+
+
 def z_sd(records: list[dict], name: str) -> float:
     """sd over the replicates (ddof 1) of z = (θ̃ − posterior mean) / posterior sd of coefficient ``name``
     (records with ``truth`` and ``posterior`` {name: {"mean", "sd"}}); NaN for fewer than 2."""
@@ -215,11 +253,15 @@ def summarize(records: list[dict], names: list[str], n_draws: int, bins: int | N
     dict
         ``replicates`` N and per coefficient ``coverage_50``, ``coverage_90``, ``rank_uniformity_p``,
         ``rank_counts`` (B,), ``z_sd`` (:func:`z_sd`), and the campaign-wide ``z_sd_se`` 1/√(2(N − 1)),
-        ``rank_bins``, ``draws_per_replicate``, ``coverage_band_95`` {level: [low, high]} and
+        ``rank_bins``, ``draws_per_replicate``, ``coverage_band_95`` {level: [low, high]},
+        ``coverage_band_familywise_95`` {level: [low, high]} (mass :func:`familywise_mass` of K = len(names) ×
+        len(LEVELS)), ``coverage_outside_expected`` (Σ over the K coverages of :func:`outside_probability`:
+        how many calibrated intervals put outside their own 95 % band on average) and
         ``rank_count_band_95`` [low, high] (count per bin).
     """
     n = len(records)
     b = rank_bins(n_draws, n, bins)
+    k = len(names) * len(LEVELS)
     coefficients = {}
     for name in names:
         ranks = np.array([r["ranks"][name] for r in records], int)
@@ -234,5 +276,8 @@ def summarize(records: list[dict], names: list[str], n_draws: int, bins: int | N
     lo, hi = binomial_band(n, 1.0 / b)
     return {"replicates": n, "coefficients": coefficients, "rank_bins": b, "draws_per_replicate": n_draws,
             "coverage_band_95": {str(int(100 * lv)): list(binomial_band(n, lv)) for lv in LEVELS},
+            "coverage_band_familywise_95": {str(int(100 * lv)): list(binomial_band(n, lv, familywise_mass(k)))
+                                            for lv in LEVELS},
+            "coverage_outside_expected": len(names) * sum(outside_probability(n, lv) for lv in LEVELS),
             "rank_count_band_95": [lo * n, hi * n],
             "z_sd_se": 1.0 / math.sqrt(2 * (n - 1)) if n > 1 else float("nan")}
