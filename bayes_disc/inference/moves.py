@@ -1,4 +1,5 @@
-"""Sampler moves that use the flights' block structure, so that mixing does not degrade as flights are added.
+"""The sampler's own Metropolis–Hastings moves: block moves that use the flights' structure, so that mixing
+does not degrade as flights are added, and the independence jump that remembers its proposal densities.
 
 θ = (θ_s, θ_1, …, θ_F): the shared parameters (coefficients, extension block) and every flight's own block
 (initial conditions, its observation-model parameters). Given θ_s the flights are independent: the prior is
@@ -19,12 +20,19 @@ Two exact Metropolis–Hastings moves follow (each leaves the posterior invarian
   covariance). The proposal is a translation by M δ with M fixed and δ symmetric, so its Hastings factor
   is 1; it moves in the s-dimensional subspace where the coefficients' posterior correlations with the
   flights' initial conditions are followed, so its step size does not shrink with the number of flights.
+
+And :class:`IndependenceJump` — the independence Metropolis–Hastings jump x′ ~ q, accepted with probability
+min(1, p(x′ | y) q(x) / p(x | y) q(x′)), that keeps ln q of every walker's position after the jump, so a
+walker that has not moved since (rejected, or untouched by the moves in between) costs no new density
+evaluation: with the ridge proposals' per-point algebra, ln q costs about as much as the log-posterior at
+24 flights (298 parameters: 0.097 s against 0.16 s for 128 walkers).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+from emcee.moves.mh import MHMove
 from emcee.moves.move import Move
 from emcee.state import State
 
@@ -138,3 +146,43 @@ class SharedShift:
         new[:, :s] += delta
         new[:, s:] += delta @ self.regression.T
         return new, np.zeros(coords.shape[0])
+
+
+class IndependenceJump(MHMove):
+    """Independence Metropolis–Hastings jumps from ``proposal`` with ln q of unmoved walkers remembered
+    (module docstring). The same proposals, random numbers and acceptance ratios as ``MHMove(proposal)``
+    (a proposal whose ``__call__`` draws and returns ln q(x) − ln q(x′)).
+
+    Parameters
+    ----------
+    proposal : object
+        ``draw(n, random)`` → (n, dim) points and ``log_density(x)`` → (n,) ln q (up to a constant), e.g.
+        :class:`.proposals.CompositeProposal`.
+    """
+
+    def __init__(self, proposal):
+        super().__init__(self._jump)
+        self.proposal = proposal
+        self._memo: tuple[np.ndarray, np.ndarray] | None = None   # walkers after the last jump, their ln q
+        self._log_q: tuple[np.ndarray, np.ndarray] | None = None   # this jump's (ln q(x), ln q(x′))
+
+    def _known(self, coords: np.ndarray) -> np.ndarray:
+        """ln q (nw,) of the walkers: remembered where a walker is where the last jump left it."""
+        out = np.empty(coords.shape[0])
+        known = np.zeros(coords.shape[0], bool)
+        if self._memo is not None and self._memo[0].shape == coords.shape:
+            known = np.all(coords == self._memo[0], axis=1)
+            out[known] = self._memo[1][known]
+        if not known.all():
+            out[~known] = self.proposal.log_density(coords[~known])
+        return out
+
+    def _jump(self, coords, random):
+        new = self.proposal.draw(coords.shape[0], random)
+        self._log_q = (self._known(coords), self.proposal.log_density(new))
+        return new, self._log_q[0] - self._log_q[1]
+
+    def propose(self, model, state):
+        state, accepted = super().propose(model, state)
+        self._memo = (state.coords.copy(), np.where(accepted, self._log_q[1], self._log_q[0]))
+        return state, accepted

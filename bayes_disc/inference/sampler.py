@@ -56,7 +56,7 @@ from .backend import RoundBackend
 from .config import SamplerSettings
 from .diagnostics_mcmc import ess_bulk, rhat_across
 from .model import Problem
-from .moves import FlightBlockMove, SharedShift, block_factors
+from .moves import FlightBlockMove, IndependenceJump, SharedShift, block_factors
 from .proposals import CompositeProposal, Proposal
 
 logger = logging.getLogger(__name__)
@@ -110,7 +110,7 @@ def _moves(problem: Problem, proposal: Proposal, independence: CompositeProposal
             moves.append((move, block_fraction * share))
     rest = 1.0 - block_fraction
     if fraction > 0:
-        moves.append((emcee.moves.MHMove(independence), rest * fraction))
+        moves.append((IndependenceJump(independence), rest * fraction))
     if fraction < 1:
         g0 = 2.38 / np.sqrt(2 * problem.dim)
         for kind, share in DE_MIX:
