@@ -64,15 +64,16 @@ logger = logging.getLogger(__name__)
 #: re-fits of the Gaussian reference (and of the independence proposal's weights) during warm-up
 ADAPTATIONS = 2
 
-#: The Metropolis–Hastings share is all independence jumps. Preconditioned Crank–Nicolson steps (ρ = 0.97)
-#: on the Gaussian reference had half of it until stop 31; measured from stationary walkers of
-#: benchmarks/bench_scale.py's kept runs (acceptance and mean squared jump in posterior sds, per move),
-#: they were accepted 0.7 % (4 flights), 0.3 % (12) and 0.0 % (24) of the time and moved the coefficients
-#: by 0.005 sd² per proposal, against 10 %, 10 % and 3 % and 1.7, 1.9 and 0.6 sd² for the independence
-#: jumps (the posterior's curved valley is not the Gaussian the pCN steps are reversible for). With their
-#: share given to the independence jumps, on the same steps of the same data (bench_scale.py): the
-#: coefficients' smallest bulk ESS 879 → 1141 (4 flights, steps 150–300) and 805 → 1006 (12 flights,
-#: 175–350), τ 14.3 → 12.8 and 18.6 → 15.8 steps.
+# The Metropolis–Hastings share is all independence jumps. Preconditioned Crank–Nicolson steps (ρ = 0.97)
+# on the Gaussian reference had half of it until stop 31; measured from stationary walkers of
+# benchmarks/bench_scale.py's kept runs (acceptance and mean squared jump in posterior sds, per move),
+# they were accepted 0.7 % (4 flights), 0.3 % (12) and 0.0 % (24) of the time and moved the coefficients
+# by 0.005 sd² per proposal, against 10 %, 10 % and 3 % and 1.7, 1.9 and 0.6 sd² for the independence
+# jumps (the posterior's curved valley is not the Gaussian the pCN steps are reversible for). With their
+# share given to the independence jumps, on the same steps of the same data (bench_scale.py): the
+# coefficients' smallest bulk ESS 879 → 1141 (4 flights, steps 150–300) and 805 → 1006 (12 flights,
+# 175–350), τ 14.3 → 12.8 and 18.6 → 15.8 steps.
+
 #: Within the DE share: emcee's DE move with γ scaled down (accepted ~30 % on the demo posterior,
 #: against ~4 % for the default γ = 2.38/√(2·dim)), the default DE move and the snooker move.
 DE_SCALE = 0.35
