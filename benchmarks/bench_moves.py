@@ -1,0 +1,81 @@
+"""Benchmark of the sampler's moves one at a time (issue 18): from the stationary walkers of a kept run,
+each move's acceptance rate and mean squared jump, in posterior sds, of the shared parameters and of the
+flights' own parameters.
+
+A kept run is a folder written by ``benchmarks/bench_scale.py --keep DIR`` (DIR/f<flights>, with its
+config.yaml and out/chains). The walkers are every ensemble's last step; the posterior sds those of the
+second half of the chains; the Gaussian reference and the independence proposal those saved with the
+chains. Each move is applied once to all walkers, ``--repeats`` times with different seeds. This is how
+stop 31 found the pCN steps (dropped since) accepted < 1 % of the time.
+
+    python benchmarks/bench_moves.py DIR/f12 [--repeats 2]
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import emcee
+import numpy as np
+from emcee.state import State
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bayes_disc.inference.config import load_config  # noqa: E402
+from bayes_disc.inference.data import build_problem  # noqa: E402
+from bayes_disc.inference.moves import FlightBlockMove, IndependenceJump, SharedShift, block_factors  # noqa: E402
+from bayes_disc.inference.proposals import CompositeProposal, Proposal  # noqa: E402
+
+
+class _Model:
+    """The part of emcee's model a move uses: the log-probability with blobs and a random state."""
+
+    def __init__(self, problem, seed: int):
+        self.problem = problem
+        self.random = np.random.RandomState(seed)
+
+    def compute_log_prob_fn(self, coords):
+        b = self.problem.log_prob_blobs(coords)
+        return b[:, 0], b[:, 1:]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("case", type=Path, help="a kept bench_scale case, e.g. DIR/f12")
+    ap.add_argument("--repeats", type=int, default=2)
+    args = ap.parse_args(argv)
+    problem = build_problem(load_config(args.case / "config.yaml"))
+    chains_dir = args.case / "out" / "chains"
+    reference = Proposal.load(chains_dir / "proposal.npz")
+    independence = CompositeProposal.load(chains_dir / "independence.npz")
+    chains = np.stack([emcee.backends.HDFBackend(str(f), read_only=True).get_chain()
+                       for f in sorted(chains_dir.glob("ensemble_*.h5"))])
+    sd = chains[:, chains.shape[1] // 2:].reshape(-1, problem.dim).std(axis=0)
+    x0 = chains[:, -1].reshape(-1, problem.dim)
+    blobs = problem.log_prob_blobs(x0)
+    s = problem.ic_start
+    conditional, shared, regression = block_factors(problem, reference.cov)
+    moves = {"independence jump": IndependenceJump(independence),
+             "flight-block Gibbs sweep": FlightBlockMove(problem, conditional),
+             "shared shift": emcee.moves.MHMove(SharedShift(shared, regression))}
+    print(f"{args.case}: {problem.n_flights} flights, {problem.dim} parameters ({s} shared), {x0.shape[0]} walkers")
+    for name, move in moves.items():
+        acc, js, jf, t0 = [], [], [], time.perf_counter()
+        for r in range(args.repeats):
+            state = State(x0.copy(), log_prob=blobs[:, 0].copy(), blobs=blobs[:, 1:].copy())
+            new, accepted = move.propose(_Model(problem, r), state)
+            d = (new.coords - x0) / sd
+            acc.append(accepted.mean())
+            js.append(np.mean(np.sum(d[:, :s] ** 2, axis=1)))
+            jf.append(np.mean(np.sum(d[:, s:] ** 2, axis=1)))
+        print(f"  {name:26s} accepted {np.mean(acc):.3f} (Gibbs: any flight)  mean squared jump: shared "
+              f"{np.mean(js):.3f} of {s} sd², flights {np.mean(jf):.2f} of {problem.dim - s} sd²  "
+              f"({(time.perf_counter() - t0) / args.repeats:.2f} s per application)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
