@@ -139,6 +139,7 @@ def test_ridge_draw_uses_the_interpolated_factor_of_its_density():
 
 
 def test_composite_independence_move_leaves_the_target_invariant(tmp_path):
+    from bayes_disc.inference.moves import IndependenceJump
     from bayes_disc.inference.proposals import CompositeProposal
     target = _Target()
     laplace = MixtureProposal.from_components([target.m + 0.5], [np.eye(3)], [0.0])
@@ -147,7 +148,7 @@ def test_composite_independence_move_leaves_the_target_invariant(tmp_path):
     loaded = CompositeProposal.load(tmp_path / "q.npz")
     x = np.random.default_rng(1).normal(size=(20, 3))
     np.testing.assert_allclose(loaded.log_density(x), comp.log_density(x))
-    sampler = emcee.EnsembleSampler(32, 3, target.log_prob, vectorize=True, moves=[emcee.moves.MHMove(loaded)])
+    sampler = emcee.EnsembleSampler(32, 3, target.log_prob, vectorize=True, moves=[IndependenceJump(loaded)])
     sampler.random_state = np.random.RandomState(3).get_state()
     sampler.run_mcmc(np.random.default_rng(4).normal(size=(32, 3)), 2000, progress=False)
     x = sampler.get_chain(discard=200, flat=True)

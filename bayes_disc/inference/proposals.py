@@ -288,7 +288,8 @@ class RidgeProposal:
 
 @dataclass(frozen=True)
 class CompositeProposal:
-    """Σ_j w_j q_j(x) over proposals with ``log_density`` and ``draw``; an independence MH proposal."""
+    """Σ_j w_j q_j(x) over proposals with ``log_density`` and ``draw``; the sampler jumps from it with
+    :class:`.moves.IndependenceJump`."""
 
     parts: tuple
     log_weights: np.ndarray
@@ -304,10 +305,6 @@ class CompositeProposal:
         for jj in np.unique(j):
             out[j == jj] = self.parts[jj].draw(int(np.sum(j == jj)), random)
         return out
-
-    def __call__(self, coords, random):
-        new = self.draw(coords.shape[0], random)
-        return new, self.log_density(coords) - self.log_density(new)
 
     def reweighted(self, samples: np.ndarray, floor: float = WEIGHT_FLOOR) -> "CompositeProposal":
         """Weights re-fitted to posterior samples (n, dim) by one EM step: w_j ← mean over the samples of

@@ -66,7 +66,7 @@ ADAPTATIONS = 2
 
 # The Metropolis–Hastings share is all independence jumps. Preconditioned Crank–Nicolson steps (ρ = 0.97)
 # on the Gaussian reference had half of it until stop 31; measured from stationary walkers of
-# benchmarks/bench_scale.py's kept runs (acceptance and mean squared jump in posterior sds, per move),
+# benchmarks/bench_scale.py's kept runs (benchmarks/bench_moves.py: acceptance and mean squared jump in posterior sds),
 # they were accepted 0.7 % (4 flights), 0.3 % (12) and 0.0 % (24) of the time and moved the coefficients
 # by 0.005 sd² per proposal, against 10 %, 10 % and 3 % and 1.7, 1.9 and 0.6 sd² for the independence
 # jumps (the posterior's curved valley is not the Gaussian the pCN steps are reversible for). With their
