@@ -132,9 +132,15 @@ class MixtureProposal:
         return np.logaddexp.reduce(out, axis=0) - 0.5 * d * np.log(2 * np.pi)
 
     def draw(self, n: int, random) -> np.ndarray:
+        """n (n, dim) draws: a component per draw, then m_k + L_k z, one matrix product per component (not
+        a gathered (n, dim, dim) stack of factors: 2.8 GB for 4000 draws at 298 parameters)."""
         k = random.choice(self.means.shape[0], size=n, p=self.weights / self.weights.sum())
         z = random.randn(n, self.means.shape[1])
-        return self.means[k] + np.einsum("nij,nj->ni", self.chols[k], z)
+        out = self.means[k]
+        for j in np.unique(k):
+            at = k == j
+            out[at] += z[at] @ self.chols[j].T
+        return out
 
     def __call__(self, coords, random):
         new = self.draw(coords.shape[0], random)
