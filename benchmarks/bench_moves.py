@@ -6,7 +6,8 @@ A kept run is a folder written by ``benchmarks/bench_scale.py --keep DIR`` (DIR/
 config.yaml and out/chains). The walkers are every ensemble's last step; the posterior sds those of the
 second half of the chains; the Gaussian reference and the independence proposal those saved with the
 chains. Each move is applied once to all walkers, ``--repeats`` times with different seeds. This is how
-stop 31 found the pCN steps (dropped since) accepted < 1 % of the time.
+stop 31 found the pCN steps (dropped since) accepted < 1 % of the time. Then the independence
+proposal's coverage of the walkers (ln p/q quantiles) and how often each walker's shared parameters moved.
 
     python benchmarks/bench_moves.py DIR/f12 [--repeats 2]
 """
@@ -74,7 +75,25 @@ def main(argv=None) -> int:
         print(f"  {name:26s} accepted {np.mean(acc):.3f} (Gibbs: any flight)  mean squared jump: shared "
               f"{np.mean(js):.3f} of {s} sd², flights {np.mean(jf):.2f} of {problem.dim - s} sd²  "
               f"({(time.perf_counter() - t0) / args.repeats:.2f} s per application)")
+    coverage(problem, independence, chains, x0, blobs[:, 0])
     return 0
+
+
+def coverage(problem, independence, chains: np.ndarray, x0: np.ndarray, log_prob: np.ndarray) -> None:
+    """How well the independence proposal covers where the walkers are: w = p(x | y) / q(x) at every walker
+    (relative to the median walker's). A walker whose ln w exceeds a typical proposal's by Δ accepts a
+    jump with probability ≈ e^−Δ, so it moves only by the local moves; the share of steps in which each
+    walker's shared parameters changed (second half of the chains) shows it."""
+    lw = log_prob - independence.log_density(x0)
+    lw -= np.median(lw)
+    q = np.percentile(lw, [5, 25, 75, 95, 99])
+    shared = chains[:, chains.shape[1] // 2:, :, :problem.ic_start]
+    rate = (np.abs(np.diff(shared, axis=1)).sum(axis=-1) > 0).mean(axis=1).ravel()
+    print(f"  independence proposal's coverage: ln p/q at the walkers minus its median: 5 % {q[0]:.1f}, "
+          f"25 % {q[1]:.1f}, 75 % {q[2]:.1f}, 95 % {q[3]:.1f}, 99 % {q[4]:.1f}, max {lw.max():.1f}; "
+          f"{np.mean(lw > np.log(20)):.1%} of the walkers above ln 20 (a median proposal accepted < 5 %)")
+    print(f"  share of steps that moved a walker's shared parameters (second half): median {np.median(rate):.3f}, "
+          f"5 % {np.percentile(rate, 5):.3f}, least {rate.min():.3f}")
 
 
 if __name__ == "__main__":
