@@ -59,3 +59,47 @@ def test_tau_of_ar1_near_its_theory():
     rho = 0.8                                              # integrated time (1 + ρ) / (1 − ρ) = 9
     tau = _tau(ar1_chain(2000, 32, 3, rho, 2))
     np.testing.assert_allclose(tau, (1 + rho) / (1 - rho), rtol=0.15)
+
+
+def _write_chain(path, chain: np.ndarray) -> None:
+    """One ensemble's steps (n_steps, n_walkers, dim) in an emcee HDF5 chain file."""
+    from emcee.state import State
+    n_steps, n_w, dim = chain.shape
+    backend = emcee.backends.HDFBackend(str(path))
+    backend.reset(n_w, dim)
+    backend.grow(n_steps, None)
+    random = np.random.RandomState(0)
+    for t in range(n_steps):
+        backend.save_step(State(chain[t], log_prob=np.zeros(n_w), random_state=random.get_state()),
+                          np.ones(n_w, bool))
+
+
+def test_check_on_stored_chains_reads_blocks_and_gives_the_in_memory_verdict(tmp_path, monkeypatch):
+    """The convergence check on chain files (read a block of parameters at a time) gives the verdict of the
+    same steps held in memory in one block; walkers that stop moving (repeated values: rank ties) included."""
+    n_ens, n_steps, n_w, dim = 3, 140, 12, 23
+    chains = np.stack([ar1_chain(n_steps, n_w, dim, 0.7 + 0.05 * e, seed=e) for e in range(n_ens)])
+    chains[1, 60:, 3, :5] = chains[1, 59, 3, :5]                  # a stuck walker: ties in the ranks
+    chains[2, :, :, 7] += 0.3                                       # an ensemble off in one parameter
+    paths = [tmp_path / f"ensemble_{e}.h5" for e in range(n_ens)]
+    for p, c in zip(paths, chains):
+        _write_chain(p, c)
+    settings = sampler.SamplerSettings(ess=100, min_steps=0, processes=2)
+    coef = np.array([0, 2, 7, 11])
+    whole = sampler.convergence(chains[:, 20:], settings, coef, first_step=20)
+    reads = []
+    block = sampler.StoredChains.block
+
+    def spy(self, skip, cols):
+        out = block(self, skip, cols)
+        reads.append(out.shape[-1])
+        return out
+
+    monkeypatch.setattr(sampler, "CHECK_VALUES", n_ens * (n_steps - 20) * n_w * 4)   # blocks of 4 parameters
+    monkeypatch.setattr(sampler.StoredChains, "block", spy)
+    stored = sampler.convergence(sampler.StoredChains(paths, start=20), settings, coef, first_step=20)
+    assert max(reads) == 4 and sum(reads) == 2 * dim                 # two passes, never the whole chain
+    assert whole["rhat_max"] > 1.01                                  # the offset ensemble is seen
+    for key in ("burn", "n_over_tau", "rhat_max", "ess_min_coef", "converged"):
+        assert stored[key] == pytest.approx(whole[key], rel=1e-12), key
+    np.testing.assert_allclose(stored["tau"], whole["tau"], rtol=1e-12)

@@ -188,8 +188,9 @@ def run_campaign(cal: CalConfig, *, scheduler: str | None = None, workers: int =
     out.mkdir(parents=True, exist_ok=True)
     check_campaign(cal)
     todo = pending(cal)
+    where = f"on {scheduler}" if scheduler else f"on {workers} local worker{'s' if workers != 1 else ''}"
     logger.info(f"{cal.name}: {cal.replicates - len(todo)} of {cal.replicates} replicates already done, "
-                f"{len(todo)} to run" + (f" on {scheduler}" if scheduler else f" on {workers} local workers"))
+                f"{len(todo)} to run {where}")
     if todo:
         with dask_client(scheduler, workers) as client:
             run_replicates(cal, todo, client, progress=progress)

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import json
 import logging
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -280,6 +281,55 @@ def _read(paths, blobs: bool = False, start: int = 0):
     return (chain, lp, acc, ss) if blobs else (chain, lp, acc)
 
 
+class StoredChains:
+    """The ensembles' stored steps from ``start`` on, read a block of parameters at a time, so that a
+    convergence check holds one block of the chain in memory, not the whole chain (at 24 flights the
+    chain after the warm-up was 1.0 GB at step 950 and grew with every step).
+
+    Parameters
+    ----------
+    paths : list of Path
+        The ensembles' chain files (:func:`chain_paths`).
+    start : int
+        First step read.
+
+    Attributes
+    ----------
+    shape : tuple
+        (n_ensembles, n_steps, n_walkers, dim): n_steps the shortest ensemble's steps after ``start``.
+    """
+
+    def __init__(self, paths, start: int = 0):
+        self.backends = [emcee.backends.HDFBackend(str(p), read_only=True) for p in paths]
+        n = min(b.iteration for b in self.backends) - start
+        if n <= 0:
+            raise ValueError(f"{Path(paths[0]).parent}: no stored step after step {start}")
+        self.start = start
+        self.shape = (len(paths), n, *self.backends[0].shape)
+        self._lock = threading.Lock()      # one HDF5 read at a time (the check's threads share the files)
+
+    def block(self, skip: int, cols: slice) -> np.ndarray:
+        """Steps ``skip`` … of the parameters ``cols``: (n_ensembles, n_steps − skip, n_walkers, len(cols))."""
+        first, n = self.start + skip, self.shape[1] - skip
+        with self._lock:
+            out = np.empty((self.shape[0], n, self.shape[2], len(range(self.shape[3])[cols])))
+            for e, b in enumerate(self.backends):
+                with b.open() as f:
+                    out[e] = f[b.name]["chain"][first: first + n, :, cols]
+        return out
+
+
+class _InMemoryChains:
+    """An in-memory chain (n_ensembles, n_steps, n_walkers, dim) behind :class:`StoredChains`' interface."""
+
+    def __init__(self, chain: np.ndarray):
+        self.chain = chain
+        self.shape = chain.shape
+
+    def block(self, skip: int, cols: slice) -> np.ndarray:
+        return self.chain[:, skip:, :, cols]
+
+
 #: most float64 values of one batch of FFTs in :func:`_tau` (bounds its memory: 2²⁴ values, 128 MB complex)
 TAU_BATCH_VALUES = 1 << 24
 
@@ -337,13 +387,14 @@ CHECK_BLOCK = 32
 CHECK_VALUES = 1 << 22
 
 
-def convergence(chain: np.ndarray, settings: SamplerSettings, coef_idx: np.ndarray, first_step: int = 0):
+def convergence(chain, settings: SamplerSettings, coef_idx: np.ndarray, first_step: int = 0):
     """Burn-in, τ, R-hat and ESS; returns a verdict dict.
 
     Parameters
     ----------
-    chain : (n_ens, n, n_walkers, dim) array
-        The ensembles' steps from ``first_step`` on (the warm-up before it is burn-in).
+    chain : (n_ens, n, n_walkers, dim) array or StoredChains
+        The ensembles' steps from ``first_step`` on (the warm-up before it is burn-in); stored chains are
+        read a block of parameters at a time (:class:`StoredChains`).
     settings : SamplerSettings
     coef_idx : (k,) int array
         Parameters whose bulk ESS must reach ``settings.ess``.
@@ -354,25 +405,37 @@ def convergence(chain: np.ndarray, settings: SamplerSettings, coef_idx: np.ndarr
     -------
     dict
         ``burn`` (absolute step: the warm-up and at least 5 τ after it, at most half of what follows it),
-        ``tau`` (n_ens, dim), ``n_over_tau``, ``rhat_max``, ``ess_min_coef``, ``converged``. R-hat and ESS
-        are computed in blocks of at most :data:`CHECK_BLOCK` parameters and :data:`CHECK_VALUES` draws
-        (``settings.processes`` blocks at once, in threads: the sampling processes wait during a check), so
-        memory stays bounded as the chains grow.
+        ``tau`` (n_ens, dim), ``n_over_tau``, ``rhat_max``, ``ess_min_coef``, ``converged``. Every statistic
+        is computed per parameter, in blocks of at most :data:`CHECK_BLOCK` parameters and
+        :data:`CHECK_VALUES` draws (``settings.processes`` blocks at once, in threads: the sampling
+        processes wait during a check), so memory stays bounded as the chains grow: two passes over the
+        blocks, τ on the whole window (for the burn-in), then τ, R-hat and ESS after it.
     """
-    n_ens, n = chain.shape[:2]
+    source = chain if hasattr(chain, "block") else _InMemoryChains(np.asarray(chain))
+    n_ens, n, n_w, dim = source.shape
     workers = max(1, settings.processes)
-    tau0 = np.array([_tau(chain[e], workers=workers) for e in range(n_ens)])
-    skip = int(min(np.ceil(5 * np.nanmax(tau0)), n // 2))
-    post = chain[:, skip:]
-    tau = np.array([_tau(post[e], workers=workers) for e in range(n_ens)])
-    n_over_tau = (n - skip) / np.nanmax(tau)
-    per = max(1, min(CHECK_BLOCK, CHECK_VALUES // post[..., 0].size))
-    blocks = [slice(j, j + per) for j in range(0, chain.shape[-1], per)]
+    per = max(1, min(CHECK_BLOCK, CHECK_VALUES // (n_ens * n * n_w)))
+    blocks = [slice(j, min(j + per, dim)) for j in range(0, dim, per)]
+    coef = np.zeros(dim, bool)
+    coef[np.asarray(coef_idx)] = True
+
     with ThreadPoolExecutor(max_workers=workers) as threads:     # the sorts and FFTs release the GIL
-        rh = np.concatenate(list(threads.map(lambda b: rhat_across(post[..., b]), blocks)))
-        coef = np.asarray(coef_idx)                                  # the rule asks ESS of these alone
-        ess = np.concatenate(list(threads.map(lambda j: ess_bulk(post[..., coef[j: j + per]]),
-                                              range(0, coef.size, per))))
+        def tau_of(x):
+            return np.array([_tau(x[e]) for e in range(n_ens)])             # (n_ens, block)
+
+        tau0 = np.concatenate(list(threads.map(lambda b: tau_of(source.block(0, b)), blocks)), axis=1)
+        skip = int(min(np.ceil(5 * np.nanmax(tau0)), n // 2))
+
+        def after_burn(b):
+            x = source.block(skip, b)
+            wanted = np.flatnonzero(coef[b])                        # the rule asks ESS of the coefficients alone
+            return tau_of(x), rhat_across(x), (ess_bulk(x[..., wanted]) if wanted.size else np.zeros(0))
+
+        parts = list(threads.map(after_burn, blocks))
+    tau = np.concatenate([p[0] for p in parts], axis=1)
+    rh = np.concatenate([p[1] for p in parts])
+    ess = np.concatenate([p[2] for p in parts])
+    n_over_tau = (n - skip) / np.nanmax(tau)
     ok = (first_step + n >= settings.min_steps and n_over_tau >= settings.n_tau and np.all(rh < settings.rhat)
           and np.all(ess >= settings.ess))
     return {"burn": first_step + skip, "tau": tau, "n_over_tau": float(n_over_tau), "rhat_max": float(np.max(rh)),
@@ -658,7 +721,7 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
                         logger.debug(f"warm-up adaptation {proposal.adapted} of {ADAPTATIONS} at step {done}")
                         break  # new pool with the new proposal
                     if done >= adapt_at[-1] + settings.check_every and checked != done:
-                        verdict = convergence(_read(paths, start=adapt_at[-1])[0], settings, coef_idx,
+                        verdict = convergence(StoredChains(paths, start=adapt_at[-1]), settings, coef_idx,
                                               first_step=adapt_at[-1])
                         checked, fraction = done, convergence_fraction(verdict, settings, done)
                         record({"steps": done, "elapsed_s": round(time.perf_counter() - t_start, 3),
