@@ -85,3 +85,35 @@ def test_summary_diagnostics_nan_for_non_finite_draws():
     out = summary_diagnostics(x)
     assert all(np.isnan(out[c][0]) for c in SUMMARY_COLUMNS)
     assert all(np.isfinite(out[c][[1, 2]]).all() for c in SUMMARY_COLUMNS)
+
+
+def sampler_like(n_ens: int, n_steps: int, n_w: int, dim: int, seed: int) -> np.ndarray:
+    """Ensemble chains (n_ens, n_steps, n_w, dim) whose walkers repeat their position when a proposal is
+    rejected (80 % of steps), two walkers stuck at the same value (a tie across runs), and a coarse
+    parameter whose runs tie with each other."""
+    rng = np.random.default_rng(seed)
+    x = rng.standard_normal((n_ens, n_steps, n_w, dim)).cumsum(axis=1) * 0.2
+    for t in range(1, n_steps):
+        held = rng.random((n_ens, n_w)) < 0.8
+        x[:, t][held] = x[:, t - 1][held]
+    x[0, :, 1, 0] = x[1, :, 2, 0] = 0.25
+    x[..., 1] = np.round(x[..., 1], 1)
+    return x
+
+
+@pytest.mark.parametrize("n_steps,n_w", [(40, 6), (41, 6), (41, 5)])
+def test_run_length_ranks_equal_sorting_every_draw(n_steps, n_w):
+    """The ranks found from runs of repeated draws (diagnostics_mcmc._z_and_median) are those of sorting
+    every draw, bit for bit, and so are R-hat across ensembles and bulk ESS (even and odd draw counts)."""
+    from bayes_disc.inference import diagnostics_mcmc as dm
+    c = sampler_like(3, n_steps, n_w, 4, n_steps * n_w)
+    per_walker = np.moveaxis(np.moveaxis(c, 2, 1).reshape(3 * n_w, n_steps, 4), 2, 0)
+    z, median = dm._z_and_median(per_walker)
+    np.testing.assert_array_equal(z, dm._z_scale_sorted(per_walker))
+    np.testing.assert_array_equal(median, np.median(per_walker.reshape(4, -1), axis=1))
+    pooled = dm._split(np.moveaxis(c.reshape(3, n_steps * n_w, 4), 2, 0))
+    folded = np.abs(pooled - np.median(pooled.reshape(4, -1), axis=1)[:, None, None])
+    sorted_rhat = np.maximum(dm._rhat(dm._z_scale_sorted(pooled)), dm._rhat(dm._z_scale_sorted(folded)))
+    np.testing.assert_array_equal(rhat_across(c), sorted_rhat)
+    np.testing.assert_array_equal(ess_bulk(c), dm._ess(dm._z_scale_sorted(dm._split(per_walker))))
+    np.testing.assert_allclose(rhat_across(c), arviz(np.moveaxis(c.reshape(3, -1, 4), 2, 0), "rhat"), rtol=1e-10)
