@@ -254,33 +254,6 @@ class Chains:
     wall_time_s: float = 0.0
 
 
-def _read(paths, blobs: bool = False, start: int = 0):
-    """The ensembles' stored steps from ``start`` on: chain (n_ens, n, walkers, dim), log-probabilities
-    (n_ens, n, walkers), acceptance fractions (n_ens, walkers) and, with ``blobs``, S_g (n_ens, n, walkers,
-    n_groups); n the shortest ensemble's steps after ``start``. Read into one preallocated array per
-    quantity, only the steps asked for (memory: the part of the chain in use, not the whole run)."""
-    backends = [emcee.backends.HDFBackend(str(p), read_only=True) for p in paths]
-    n = min(b.iteration for b in backends) - start
-    if n <= 0:
-        raise ValueError(f"{Path(paths[0]).parent}: no stored step after step {start}")
-    walkers, dim = backends[0].shape
-    chain = np.empty((len(paths), n, walkers, dim))
-    lp = np.empty((len(paths), n, walkers))
-    acc = np.stack([b.accepted / max(b.iteration, 1) for b in backends])
-    ss = None
-    for e, b in enumerate(backends):
-        with b.open() as f:
-            g = f[b.name]
-            chain[e] = g["chain"][start: start + n]
-            lp[e] = g["log_prob"][start: start + n]
-            if blobs:  # S_g per noise group; emcee drops the last axis when there is one
-                x = np.asarray(g["blobs"][start: start + n], float).reshape(n, walkers, -1)
-                if ss is None:
-                    ss = np.empty((len(paths), n, walkers, x.shape[-1]))
-                ss[e] = x
-    return (chain, lp, acc, ss) if blobs else (chain, lp, acc)
-
-
 class StoredChains:
     """The ensembles' stored steps from ``start`` on, read a block of parameters at a time, so that a
     convergence check holds one block of the chain in memory, not the whole chain (at 24 flights the
@@ -328,6 +301,31 @@ class _InMemoryChains:
 
     def block(self, skip: int, cols: slice) -> np.ndarray:
         return self.chain[:, skip:, :, cols]
+
+
+def _read(paths, blobs: bool = False, start: int = 0):
+    """The ensembles' stored steps from ``start`` on: chain (n_ens, n, walkers, dim), log-probabilities
+    (n_ens, n, walkers), acceptance fractions (n_ens, walkers) and, with ``blobs``, S_g (n_ens, n, walkers,
+    n_groups); n the shortest ensemble's steps after ``start``. Read into one preallocated array per
+    quantity, only the steps asked for (memory: the part of the chain in use, not the whole run)."""
+    stored = StoredChains(paths, start)
+    backends = stored.backends
+    _, n, walkers, dim = stored.shape
+    chain = np.empty(stored.shape)
+    lp = np.empty((len(paths), n, walkers))
+    acc = np.stack([b.accepted / max(b.iteration, 1) for b in backends])
+    ss = None
+    for e, b in enumerate(backends):
+        with b.open() as f:
+            g = f[b.name]
+            chain[e] = g["chain"][start: start + n]
+            lp[e] = g["log_prob"][start: start + n]
+            if blobs:  # S_g per noise group; emcee drops the last axis when there is one
+                x = np.asarray(g["blobs"][start: start + n], float).reshape(n, walkers, -1)
+                if ss is None:
+                    ss = np.empty((len(paths), n, walkers, x.shape[-1]))
+                ss[e] = x
+    return (chain, lp, acc, ss) if blobs else (chain, lp, acc)
 
 
 #: most float64 values of one batch of FFTs in :func:`_tau` (bounds its memory: 2²⁴ values, 128 MB complex)
