@@ -12,6 +12,16 @@ identified combination such as CM0 + CMq·q̄ with the flights' wobble initial c
 approximation at θ̂ is far too narrow and the path shows where the mass really lies. At every point the
 local Gauss–Newton covariance is kept, so the path can seed a ridge proposal for the sampler
 (:mod:`.sampler`) and profile verdicts for identifiability.
+
+Where the valley widens along the path, the posterior's marginal of θ_i is not the profile likelihood
+but the Laplace marginal along it,
+
+    ln g(v) = −D(v)/2 + ½ ln|S(v)| + const,     S(v) = Cov(θ_−i | θ_i = v) of the local covariance,
+
+which can keep rising while D does (24 synthetic flights: the marginal of CMq has its mass where D is
+6–18, beyond the end of a path that stopped at D > 12). A side therefore goes on past ``max_deviance``
+while ln g has fallen by less than ``max_deviance``/2 from its highest value on the path (at most
+:data:`EXTENDED_POINTS` points), so that the ridge proposal built on it covers the marginal's mass.
 """
 from __future__ import annotations
 
@@ -25,8 +35,10 @@ from .model import Problem
 
 #: the path stops past this profile deviance (≈ 3.5 σ for a Gaussian)
 MAX_DEVIANCE = 12.0
-#: at most this many points on each side of the optimum
+#: at most this many points on each side of the optimum where the profile is flat (deviance ≤ MAX_DEVIANCE)
 MAX_POINTS = 6
+#: at most this many points on a side that goes on because the Laplace marginal ln g has not yet fallen
+EXTENDED_POINTS = 12
 #: a profile fit stops when a step lowers the deviance by less than this (the deviances are read to ~0.01; the
 #: relative tolerance of a full fit would spend the evaluation budget on digits no verdict uses)
 DEVIANCE_TOL = 1e-3
@@ -97,6 +109,59 @@ class ProfilePath:
         return "bounded" if up and down else ("one-sided" if up or down else "flat")
 
 
+def conditional_log_volume(cov: np.ndarray, index: int) -> float:
+    """½ ln|S|, S = Cov(θ_−i | θ_i) = Σ_−i,−i − Σ_−i,i Σ_i,−i / Σ_ii: the Laplace marginal's volume term,
+    ½ (ln|Σ| − ln Σ_ii), with the determinant of the correlation matrix (scales from 1e−7 to 1).
+
+    Parameters
+    ----------
+    cov : (dim, dim) array
+        Local Gauss–Newton covariance.
+    index : int
+        The profiled parameter i.
+
+    Returns
+    -------
+    float
+    """
+    d = np.sqrt(np.diag(cov))
+    sign, log_det = np.linalg.slogdet(cov / np.outer(d, d))
+    if sign <= 0:
+        return -np.inf
+    return 0.5 * (log_det + 2.0 * np.sum(np.log(d)) - np.log(cov[index, index]))
+
+
+def side_done(n_points: int, deviance: float, log_g: float, best: float, max_deviance: float = MAX_DEVIANCE,
+              max_points: int = MAX_POINTS, extended_points: int = EXTENDED_POINTS) -> bool:
+    """Whether a side of a profile path stops after its latest point.
+
+    Parameters
+    ----------
+    n_points : int
+        Points on this side so far, the latest included.
+    deviance : float
+        The latest point's profile deviance D.
+    log_g : float
+        The latest point's Laplace marginal ln g = −D/2 + ½ ln|S| (relative to the optimum's).
+    best : float
+        The highest ln g on this side so far (the optimum's, 0, included).
+    max_deviance, max_points, extended_points
+        As in :func:`profile_path`.
+
+    Returns
+    -------
+    bool
+        True past ``FAILED_DEVIANCE_FACTOR`` · ``max_deviance`` (a cliff or a failed fit); after
+        ``max_points`` points while D ≤ ``max_deviance`` (a flat profile); once D > ``max_deviance`` and
+        ln g < ``best`` − ``max_deviance``/2 (the marginal has fallen too), or after ``extended_points``.
+    """
+    if deviance > FAILED_DEVIANCE_FACTOR * max_deviance:
+        return True
+    if deviance <= max_deviance:
+        return n_points >= max_points
+    return log_g < best - 0.5 * max_deviance or n_points >= extended_points
+
+
 def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, index: int, value: float, max_nfev: int,
                cost0: float):
     """Optimum of every parameter but ``index`` (held at ``value``), from x0: (θ*, cost, converged). The fit
@@ -113,19 +178,22 @@ def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, index: int, 
 
 def profile_path(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov_hat: np.ndarray, index: int,
                  max_deviance: float = MAX_DEVIANCE, max_points: int = MAX_POINTS,
-                 max_nfev: int = 40) -> ProfilePath:
+                 max_nfev: int = 40, extended_points: int = EXTENDED_POINTS) -> ProfilePath:
     """Profile of parameter ``index`` through the least-squares optimum ``theta_hat`` (noise ``sigma``,
     covariance ``cov_hat``). Steps are one local sd of θ_i (from the local covariance, at least half the
-    optimum's sd), warm-started from the previous point; each side stops past ``max_deviance``, after
-    ``max_points`` points or when a fit fails."""
+    optimum's sd), warm-started from the previous point. Each side stops when a fit fails, past
+    ``FAILED_DEVIANCE_FACTOR`` · ``max_deviance``, after ``max_points`` points while the deviance stays below
+    ``max_deviance``, and past ``max_deviance`` once the Laplace marginal ln g (module docstring) has fallen
+    by ``max_deviance``/2 from its highest value on that side, or after ``extended_points`` points."""
     r0 = whitened_residuals(theta_hat, problem, sigma)
     cost0 = 0.5 * float(r0 @ r0)
     sd0 = float(np.sqrt(cov_hat[index, index]))
     centre = ProfilePoint(value=float(theta_hat[index]), theta=theta_hat.copy(), deviance=0.0, cov=cov_hat, t=0.0)
     points = [centre]
+    volume0 = conditional_log_volume(cov_hat, index)
     for side in (1.0, -1.0):
-        x, step = theta_hat.copy(), sd0
-        for _ in range(max_points):
+        x, step, best = theta_hat.copy(), sd0, 0.0
+        for k in range(max(max_points, extended_points)):
             value = float(x[index] + side * step)
             x_new, cost, ok = _fixed_fit(problem, sigma, x, index, value, max_nfev, cost0)
             if not (ok and np.isfinite(cost)):
@@ -135,7 +203,9 @@ def profile_path(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
             points.append(ProfilePoint(value=value, theta=x_new, deviance=dev, cov=cov,
                                        t=(value - theta_hat[index]) / sd0,
                                        ok=dev <= FAILED_DEVIANCE_FACTOR * max_deviance))
-            if dev > max_deviance:
+            log_g = -0.5 * dev + conditional_log_volume(cov, index) - volume0
+            best = max(best, log_g)
+            if side_done(k + 1, dev, log_g, best, max_deviance, max_points, extended_points):
                 break
             x, step = x_new, max(float(np.sqrt(cov[index, index])), 0.5 * sd0)
     points.sort(key=lambda p: p.value)

@@ -1,0 +1,36 @@
+"""The profile path's stopping rule and the Laplace marginal's volume term (bayes_disc.inference.profile)."""
+import numpy as np
+import pytest
+
+from bayes_disc.inference.profile import (EXTENDED_POINTS, FAILED_DEVIANCE_FACTOR, MAX_DEVIANCE, MAX_POINTS,
+                                          conditional_log_volume, side_done)
+
+
+def test_conditional_log_volume_is_half_the_log_determinant_of_the_conditional_covariance():
+    rng = np.random.default_rng(4)
+    a = rng.standard_normal((7, 7))
+    scales = np.array([1.0, 1e-7, 3e-3, 0.2, 5.0, 1e-4, 0.05])      # CNr ~ 1e−7 beside positions ~ 1e−3
+    cov = (a @ a.T + 0.5 * np.eye(7)) * np.outer(scales, scales)
+    for i in (0, 1, 4):
+        rest = np.r_[0:i, i + 1:7]
+        cond = cov[np.ix_(rest, rest)] - np.outer(cov[rest, i], cov[i, rest]) / cov[i, i]
+        cond_scaled = cond / np.outer(scales[rest], scales[rest])
+        expected = 0.5 * (np.linalg.slogdet(cond_scaled)[1] + 2 * np.sum(np.log(scales[rest])))
+        assert conditional_log_volume(cov, i) == pytest.approx(expected, abs=1e-9)
+
+
+def test_a_side_stops_where_the_profile_or_else_the_marginal_says():
+    # flat profile: max_points, as before
+    assert not side_done(MAX_POINTS - 1, 2.0, -1.0, 0.0)
+    assert side_done(MAX_POINTS, 2.0, -1.0, 0.0)
+    # the deviance has risen and so has fallen the marginal: stop at once
+    assert side_done(3, MAX_DEVIANCE + 1, -0.5 * (MAX_DEVIANCE + 1), 0.0)
+    # the deviance has risen but the valley widens (ln g still near its best): go on, up to the cap
+    assert not side_done(3, MAX_DEVIANCE + 6, -1.0, 0.0)
+    assert not side_done(MAX_POINTS + 1, MAX_DEVIANCE + 6, 0.5, 1.0)
+    assert side_done(EXTENDED_POINTS, MAX_DEVIANCE + 6, -1.0, 0.0)
+    # once ln g has fallen max_deviance/2 below its best on the side
+    assert side_done(5, MAX_DEVIANCE + 6, 2.0 - 0.5 * MAX_DEVIANCE - 0.01, 2.0)
+    assert not side_done(5, MAX_DEVIANCE + 6, 2.0 - 0.5 * MAX_DEVIANCE + 0.01, 2.0)
+    # a cliff or failed fit ends the side whatever the marginal
+    assert side_done(2, FAILED_DEVIANCE_FACTOR * MAX_DEVIANCE + 1, 10.0, 10.0)
