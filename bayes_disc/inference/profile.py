@@ -18,10 +18,11 @@ but the Laplace marginal along it,
 
     ln g(v) = −D(v)/2 + ½ ln|S(v)| + const,     S(v) = Cov(θ_−i | θ_i = v) of the local covariance,
 
-which can keep rising while D does (24 synthetic flights: the marginal of CMq has its mass where D is
-6–18, beyond the end of a path that stopped at D > 12). A side therefore goes on past ``max_deviance``
-while ln g has fallen by less than ``max_deviance``/2 from its highest value on the path (at most
-:data:`EXTENDED_POINTS` points), so that the ridge proposal built on it covers the marginal's mass.
+which can keep rising while D does (24 synthetic flights: the marginal of CMq has its median where D ≈ 13
+and 5 % of its mass beyond the end of a path that stopped at D = 18). A side therefore goes on past
+``max_deviance`` while ln g has fallen by less than ``max_deviance``/2 from its highest value on that side
+(at most :data:`EXTENDED_POINTS` points; :func:`side_done`), so that the ridge proposal built on it covers
+the marginal's mass.
 """
 from __future__ import annotations
 
