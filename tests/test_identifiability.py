@@ -115,14 +115,23 @@ def test_profiles_of_the_demo_are_bounded_and_gaussian_near_the_optimum(tmp_path
     posteriors are narrow); near the optimum of these well-determined coefficients D ≈ t²."""
     from bayes_disc.inference.config import load_config
     from bayes_disc.inference.leastsq import fit_least_squares
-    from bayes_disc.inference.profile import profile_path
+    from bayes_disc.inference.profile import profile_path, profile_paths
     from bayes_disc.inference.run import build_problem
     cfg = load_config(_demo_data(tmp_path))
     problem = build_problem(cfg)
     ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
                            seed=cfg.sampler.seed)
-    for name in ("CL0", "CD0", "CLa"):
-        path = profile_path(problem, ls.theta, ls.sigma, ls.cov, problem.names.index(name))
+    names = ("CL0", "CD0", "CLa")
+    seen = []
+    paths = profile_paths(problem, ls.theta, ls.sigma, ls.cov, [problem.names.index(n) for n in names], processes=2,
+                          progress=lambda path, done, total: seen.append((path.name, done, total)))
+    assert seen == [(n, i + 1, 3) for i, n in enumerate(names)]
+    # one task per side, in two processes: the same path as fitted side after side here
+    alone = profile_path(problem, ls.theta, ls.sigma, ls.cov, problem.names.index("CD0"))
+    assert [p.value for p in alone.points] == [p.value for p in paths[1].points]
+    assert np.array_equal(alone.deviance, paths[1].deviance)
+    for name, path in zip(names, paths):
+        assert path.name == name
         assert path.classify() == "bounded", (name, path.t, path.deviance)
         near = np.abs(path.t) <= 2.5
         assert near.sum() >= 5 and np.allclose(path.deviance[near], path.t[near] ** 2, atol=0.1), (name, path.deviance)

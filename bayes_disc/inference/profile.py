@@ -177,40 +177,63 @@ def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, index: int, 
     return res.x, float(res.cost), bool(res.status > 0)
 
 
-def profile_path(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov_hat: np.ndarray, index: int,
-                 max_deviance: float = MAX_DEVIANCE, max_points: int = MAX_POINTS,
-                 max_nfev: int = 40, extended_points: int = EXTENDED_POINTS) -> ProfilePath:
-    """Profile of parameter ``index`` through the least-squares optimum ``theta_hat`` (noise ``sigma``,
-    covariance ``cov_hat``). Steps are one local sd of θ_i (from the local covariance, at least half the
-    optimum's sd), warm-started from the previous point. Each side stops when a fit fails, past
-    ``FAILED_DEVIANCE_FACTOR`` · ``max_deviance``, after ``max_points`` points while the deviance stays below
-    ``max_deviance``, and past ``max_deviance`` once the Laplace marginal ln g (module docstring) has fallen
-    by ``max_deviance``/2 from its highest value on that side, or after ``extended_points`` points."""
+def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov_hat: np.ndarray, index: int,
+                 side: float, max_deviance: float = MAX_DEVIANCE, max_points: int = MAX_POINTS,
+                 max_nfev: int = 40, extended_points: int = EXTENDED_POINTS) -> list[ProfilePoint]:
+    """The points on one side (``side`` = +1: values above θ̂_i, −1: below) of parameter ``index``'s profile
+    through the least-squares optimum ``theta_hat`` (noise ``sigma``, covariance ``cov_hat``).
+
+    Steps are one local sd of θ_i (from the local covariance, at least half the optimum's sd), warm-started
+    from the previous point. The side stops when a fit fails, past ``FAILED_DEVIANCE_FACTOR`` ·
+    ``max_deviance``, after ``max_points`` points while the deviance stays below ``max_deviance``, and past
+    ``max_deviance`` once the Laplace marginal ln g (module docstring) has fallen by ``max_deviance``/2 from
+    its highest value on that side, or after ``extended_points`` points (:func:`side_done`). The two sides
+    start from θ̂ and do not depend on each other.
+
+    Returns
+    -------
+    list of ProfilePoint
+        In the order they were fitted (moving away from θ̂); the optimum itself is not among them.
+    """
     r0 = whitened_residuals(theta_hat, problem, sigma)
     cost0 = 0.5 * float(r0 @ r0)
     sd0 = float(np.sqrt(cov_hat[index, index]))
-    centre = ProfilePoint(value=float(theta_hat[index]), theta=theta_hat.copy(), deviance=0.0, cov=cov_hat, t=0.0)
-    points = [centre]
     volume0 = conditional_log_volume(cov_hat, index)
-    for side in (1.0, -1.0):
-        x, step, best = theta_hat.copy(), sd0, 0.0
-        for k in range(max(max_points, extended_points)):
-            value = float(x[index] + side * step)
-            x_new, cost, ok = _fixed_fit(problem, sigma, x, index, value, max_nfev, cost0)
-            if not (ok and np.isfinite(cost)):
-                break
-            cov = jacobian_blocks(x_new, problem, sigma).information().inverse()
-            dev = 2.0 * (cost - cost0)
-            points.append(ProfilePoint(value=value, theta=x_new, deviance=dev, cov=cov,
-                                       t=(value - theta_hat[index]) / sd0,
-                                       ok=dev <= FAILED_DEVIANCE_FACTOR * max_deviance))
-            log_g = -0.5 * dev + conditional_log_volume(cov, index) - volume0
-            best = max(best, log_g)
-            if side_done(k + 1, dev, log_g, best, max_deviance, max_points, extended_points):
-                break
-            x, step = x_new, max(float(np.sqrt(cov[index, index])), 0.5 * sd0)
-    points.sort(key=lambda p: p.value)
+    points: list[ProfilePoint] = []
+    x, step, best = theta_hat.copy(), sd0, 0.0
+    for k in range(max(max_points, extended_points)):
+        value = float(x[index] + side * step)
+        x_new, cost, ok = _fixed_fit(problem, sigma, x, index, value, max_nfev, cost0)
+        if not (ok and np.isfinite(cost)):
+            break
+        cov = jacobian_blocks(x_new, problem, sigma).information().inverse()
+        dev = 2.0 * (cost - cost0)
+        points.append(ProfilePoint(value=value, theta=x_new, deviance=dev, cov=cov,
+                                   t=(value - theta_hat[index]) / sd0,
+                                   ok=dev <= FAILED_DEVIANCE_FACTOR * max_deviance))
+        log_g = -0.5 * dev + conditional_log_volume(cov, index) - volume0
+        best = max(best, log_g)
+        if side_done(k + 1, dev, log_g, best, max_deviance, max_points, extended_points):
+            break
+        x, step = x_new, max(float(np.sqrt(cov[index, index])), 0.5 * sd0)
+    return points
+
+
+def join_sides(problem: Problem, theta_hat: np.ndarray, cov_hat: np.ndarray, index: int,
+               sides: list[list[ProfilePoint]]) -> ProfilePath:
+    """The profile path of parameter ``index``: the optimum (t = 0) and the points of its sides
+    (:func:`profile_side`), sorted by value."""
+    centre = ProfilePoint(value=float(theta_hat[index]), theta=theta_hat.copy(), deviance=0.0, cov=cov_hat, t=0.0)
+    points = sorted([centre, *(p for side in sides for p in side)], key=lambda p: p.value)
     return ProfilePath(index=index, name=problem.names[index], points=points)
+
+
+def profile_path(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov_hat: np.ndarray, index: int,
+                 **kwargs) -> ProfilePath:
+    """Profile of parameter ``index`` through the least-squares optimum ``theta_hat``: both sides
+    (:func:`profile_side`, whose keyword arguments ``kwargs`` are) joined at the optimum."""
+    sides = [profile_side(problem, theta_hat, sigma, cov_hat, index, side, **kwargs) for side in (1.0, -1.0)]
+    return join_sides(problem, theta_hat, cov_hat, index, sides)
 
 
 _POOL: dict = {}
@@ -220,14 +243,18 @@ def _init_profile_worker(data: dict) -> None:
     _POOL.update(data)
 
 
-def _profile_task(index: int) -> ProfilePath:
+def _side_task(task: tuple[int, float]) -> list[ProfilePoint]:
     a = _POOL
-    return profile_path(a["problem"], a["theta"], a["sigma"], a["cov"], index, **a["kwargs"])
+    return profile_side(a["problem"], a["theta"], a["sigma"], a["cov"], task[0], task[1], **a["kwargs"])
 
 
 def profile_paths(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov_hat: np.ndarray, indices,
                   processes: int = 1, progress=None, **kwargs) -> list[ProfilePath]:
     """Profiles of several parameters, in ``processes`` forked worker processes (independent fits).
+
+    Each side of each path is one task (:func:`profile_side`): a path whose one side runs on past the
+    deviance limit (a curved ridge, :func:`side_done`) then no longer keeps one worker busy while the other
+    waits. The paths are the same as :func:`profile_path`'s.
 
     Parameters
     ----------
@@ -247,7 +274,7 @@ def profile_paths(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, co
         Called as ``progress(path, done, total)`` after each profile is finished, in the order of
         ``indices``.
     **kwargs
-        Passed to :func:`profile_path`.
+        Passed to :func:`profile_side`.
 
     Returns
     -------
@@ -255,21 +282,26 @@ def profile_paths(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, co
         One per index, in the order of ``indices``.
     """
     indices = list(indices)
+    tasks = [(i, side) for i in indices for side in (1.0, -1.0)]
     _POOL.update(problem=problem, theta=theta_hat, sigma=sigma, cov=cov_hat, kwargs=kwargs)
     out: list[ProfilePath] = []
 
-    def collect(paths) -> list[ProfilePath]:
-        for path in paths:
-            out.append(path)
-            if progress is not None:
-                progress(path, len(out), len(indices))
+    def collect(sides) -> list[ProfilePath]:
+        done: list[list[ProfilePoint]] = []
+        for side in sides:
+            done.append(side)
+            if len(done) == 2:
+                out.append(join_sides(problem, theta_hat, cov_hat, indices[len(out)], done))
+                done = []
+                if progress is not None:
+                    progress(out[-1], len(out), len(indices))
         return out
 
     try:
-        if processes <= 1 or len(indices) <= 1:
-            return collect(_profile_task(i) for i in indices)
-        with mp_context().Pool(min(processes, len(indices)), initializer=_init_profile_worker,
+        if processes <= 1 or len(indices) == 0:
+            return collect(_side_task(t) for t in tasks)
+        with mp_context().Pool(min(processes, len(tasks)), initializer=_init_profile_worker,
                                initargs=(dict(_POOL),)) as pool:
-            return collect(pool.imap(_profile_task, indices))
+            return collect(pool.imap(_side_task, tasks))
     finally:
         _POOL.clear()
