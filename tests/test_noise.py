@@ -502,13 +502,27 @@ def test_sample_with_robust_and_ar1_noise_writes_the_flags(tmp_path, monkeypatch
     assert "rho_b" in summary["parameters"] and "rho_a" not in summary["parameters"]
     post = az.from_netcdf(str(tmp_path / "out" / "posterior.nc")).posterior
     assert np.isfinite(post["rho"].sel(flight="b")).all() and np.isnan(post["rho"].sel(flight="a")).all()
+    # the posterior averaged over the judgement: the sampled draws (at most JUDGEMENT_DRAWS) reweighted
+    from bayes_disc.inference.robust import JUDGEMENT_DRAWS
+    avg = json.loads((tmp_path / "out" / "judgement_average.json").read_text())
+    assert avg["draws"] == min(JUDGEMENT_DRAWS, post.sizes["chain"] * post.sizes["draw"]) and avg["failed"] == 0
+    assert np.isfinite(avg["pareto_k"]) and 1 <= avg["ess"] <= avg["draws"]
+    assert set(avg["conditional"]) == set(summary["coefficients"])
+    n_draws = post.sizes["chain"] * post.sizes["draw"]
+    for name, c in avg["conditional"].items():      # equally weighted: a subset of the draws summarised
+        if avg["draws"] == n_draws:
+            assert c["q50"] == pytest.approx(float(post[name].median()), rel=1e-9), name
+        assert c["q05"] < c["q50"] < c["q95"] and c["q05"] >= float(post[name].min()), name
+    assert avg["reliable"] == (avg["pareto_k"] <= 0.7) and (set(avg["averaged"]) == set(avg["conditional"])) == avg["reliable"]
+    assert any(r.startswith("averaged over the judgement:") for r in records)
 
 
 @pytest.mark.slow
 def test_four_flights_with_outliers_and_swaps_sampled_inside_the_clean_intervals(tmp_path, monkeypatch):
     """Issue 16: four flights with 2–6 cm outliers on 1 % of the points and labels swapped in a few frames,
     sampled with ``noise.model: robust``: every injected defect is listed, and every coefficient's median
-    lies inside the 90 % interval of the same data without the defects (sampled with the plain model)."""
+    lies inside the 90 % interval of the same data without the defects (sampled with the plain model), both
+    given the judgement and averaged over it."""
     import json
     from bayes_disc.cli import main
     from bayes_disc.observation.markers import write_marker_csv
@@ -550,3 +564,10 @@ def test_four_flights_with_outliers_and_swaps_sampled_inside_the_clean_intervals
     for c in clean_s["coefficients"]:
         lo, hi = clean_s["parameters"][c]["q05"], clean_s["parameters"][c]["q95"]
         assert lo <= robust_s["parameters"][c]["q50"] <= hi, (c, robust_s["parameters"][c]["q50"], lo, hi)
+    # averaged over the judgement (importance weights to the mixture likelihood): trusted weights, and the
+    # averaged medians inside the clean data's 90 % intervals too
+    avg = json.loads((tmp_path / "defects" / "out" / "judgement_average.json").read_text())
+    assert avg["reliable"] and avg["pareto_k"] <= 0.7 and avg["failed"] == 0, avg["pareto_k"]
+    for c in clean_s["coefficients"]:
+        lo, hi = clean_s["parameters"][c]["q05"], clean_s["parameters"][c]["q95"]
+        assert lo <= avg["averaged"][c]["q50"] <= hi, (c, avg["averaged"][c], lo, hi)

@@ -425,14 +425,25 @@ def test_flagged_points_and_swapped_frames_are_listed(tiny, tmp_path):
     from bayes_disc.report import content
     run = load_run(tiny["run"])
     assert content.flagged_section(ReportContext(run, tmp_path / "f0")) is None
-    run.extras["flagged"] = {
-        "outliers": [{"flight": "a", "t": 0.125, "marker": "1", "probability": 0.999},
-                     {"flight": "b", "t": 0.5, "marker": "0", "probability": 0.97}],
-        "swaps": [{"flight": "a", "t": 0.25, "markers": ["0", "2"], "probability": 0.99}]}
+    run.extras["flagged"] = {          # flagged.json: per flight
+        "a": {"outliers": [{"flight": "a", "t": 0.125, "marker": "1", "probability": 0.999}],
+              "swaps": [{"flight": "a", "t": 0.25, "markers": ["0", "2"], "probability": 0.99}]},
+        "b": {"outliers": [{"flight": "b", "t": 0.5, "marker": "0", "probability": 0.97}], "swaps": []}}
     sec = build_sections(ReportContext(run, tmp_path / "f1"), [content.flagged_section])[0]
     assert sec.id == "flagged" and "0 ↔ 2" in sec.html and "0.1250" in sec.html and "0.970" in sec.html
     assert re.search(r"<td>a</td><td[^>]*>1</td><td[^>]*>1</td>", sec.html), sec.html
     assert re.search(r"<td>b</td><td[^>]*>1</td><td[^>]*>0</td>", sec.html), sec.html
+    assert "Averaged over the judgement" not in sec.html
+    moments = lambda m, sd: {"mean": m, "sd": sd, "q05": m - 1.645 * sd, "q50": m, "q95": m + 1.645 * sd}
+    run.extras["judgement_average"] = {"draws": 4000, "failed": 0, "pareto_k": 0.21, "ess": 3500.0, "reliable": True,
+                                       "pareto_k_max": 0.7, "conditional": {"CLa": moments(2.9, 0.1)},
+                                       "averaged": {"CLa": moments(2.95, 0.11)}}
+    sec = build_sections(ReportContext(run, tmp_path / "f2"), [content.flagged_section])[0]
+    assert "k̂ of the weights 0.21" in sec.html and "<td>CLa</td><td>2.9</td><td>2.95</td>" in sec.html
+    assert "<td>1.100</td>" in sec.html
+    run.extras["judgement_average"] |= {"pareto_k": 0.9, "reliable": False, "averaged": {}}
+    sec = build_sections(ReportContext(run, tmp_path / "f3"), [content.flagged_section])[0]
+    assert "cannot be trusted" in sec.html and "<td>CLa</td>" not in sec.html
 
 def test_diagnosis_adds_its_section_with_before_after_figure(tiny, tmp_path):
     """`diagnose` on a sampled run folder rebuilds the report with the missing-physics section filled in."""

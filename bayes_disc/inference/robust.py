@@ -8,10 +8,22 @@ per-point errors) and σ̂_f the robust scale √(median_i |r_i / c_i|² / 2.366
 so that the gross errors being judged do not inflate it. Outlying points are removed and swapped labels
 restored (:func:`~bayes_disc.observation.models.outliers.clean_flight`), the fit is refined on the cleaned
 data, and this is repeated until the flags no longer change (at most :data:`MAX_ROUNDS` times).
+
+The sampler then explores the posterior on the cleaned data, conditional on that judgement.
+:func:`average_over_judgement` turns its draws into the posterior averaged over every judgement — the
+mixture itself as the likelihood of the recording as given, σ_f integrated out
+(:func:`~bayes_disc.observation.models.outliers.mixture_log_likelihood`) — by importance sampling:
+
+    log w(θ) = Σ_f [log p_mix(y_f | θ) − log p_Gauss(y_f^clean | θ)]     (robust flights f; priors cancel)
+
+with Pareto-smoothed weights (PSIS, Vehtari et al. 2024): where the Pareto k̂ of the weights is ≤ 0.7 the
+weighted draws are the averaged posterior; above it the judgement matters more than importance sampling
+from the conditional posterior can tell, and only the conditional posterior is reported.
 """
 from __future__ import annotations
 
 import json
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -19,12 +31,20 @@ from scipy.stats import chi2
 
 from ..observation.models import MarkerPositions
 from ..observation.models.noise import RobustNoise, WhiteNoise
-from ..observation.models.outliers import Classification, classify, clean_flight
+from ..observation.models.outliers import (Classification, classify, clean_flight, log_marginal_over_scale,
+                                           mixture_log_likelihood)
 from .leastsq import LeastSquaresResult, refine_least_squares
 from .model import Problem
 
 #: the judgement a run wrote (in its output folder)
 FLAGGED = "flagged.json"
+#: the posterior averaged over the judgement (:func:`average_over_judgement`), in the run's output folder
+JUDGEMENT_AVERAGE = "judgement_average.json"
+#: most posterior draws reweighted by :func:`average_over_judgement` (each costs one simulation of every robust
+#: flight and its mixture likelihood at ~33 noise scales; PSIS's k̂ is reliable up to 1 − 1/log10(2000) ≈ 0.70)
+JUDGEMENT_DRAWS = 2000
+#: Pareto k̂ above which importance weights are not trusted (PSIS; Vehtari et al. 2024)
+PARETO_K_MAX = 0.7
 #: probability of a gross error above which a Gaussian-noise run is warned (stricter than the robust
 #: model's flag at 0.5: with 10× noise on some points, a 3.5-sd residual of a noisy point reaches 0.5 now and
 #: then, since the outlier spread, 5 cm, is then only five times its noise)
@@ -195,3 +215,164 @@ def with_saved_flags(problem: Problem, run_dir) -> Problem:
     if not path.is_file():
         raise FileNotFoundError(f"{path}: missing; the run's robust flights were cleaned as it lists (re-run sample)")
     return apply_flags(problem, json.loads(path.read_text()))
+
+
+# ------------------------------------------------------------------------------ averaged over the judgement
+def observation_whitening(model: MarkerPositions) -> np.ndarray | None:
+    """(n, m, 3, 3) W_i of every point of the flight's grid (I where unseen; per-point errors), None when
+    the flight has no per-point errors (W = I)."""
+    points = model.noise.points
+    if points is None:
+        return None
+    n, m = model.data.observed.shape
+    W = np.broadcast_to(np.eye(3), (n, m, 3, 3)).copy()
+    W[model.data.observed] = points.matrices()
+    return W
+
+
+def judgement_log_weights(raw: Problem, clean: Problem, theta: np.ndarray, ss: np.ndarray,
+                          batch: int = 64) -> np.ndarray:
+    """log w(θ) = Σ_f [log p_mix(y_f | θ) − log p_Gauss(y_f^clean | θ)] over the robust flights (module
+    docstring) of draws sampled on the cleaned data.
+
+    Parameters
+    ----------
+    raw : Problem
+        The run's problem on the data as recorded.
+    clean : Problem
+        The problem that was sampled (robust flights cleaned as judged; :func:`robust_refit`).
+    theta : (B, dim) array
+        Draws.
+    ss : (B, n_groups) array
+        Their effective sums of squares S̃_g in ``clean`` (the sampler's blobs).
+    batch : int
+        Draws simulated at once.
+
+    Returns
+    -------
+    (B,) array
+        −inf where a draw's simulation fails.
+    """
+    theta = np.atleast_2d(theta)
+    out = np.zeros(theta.shape[0])
+    for k, model in robust_flights(raw):
+        j = raw.channels[k].index(model)
+        g = clean.channel_groups(k)[j]
+        clean_model = clean.channels[k][j]
+        out -= clean_model.log_likelihood(ss[:, g])
+        n_clean = int(clean_model.group_sizes[0])
+        W, obs = observation_whitening(model), model.data.positions
+        for start in range(0, theta.shape[0], batch):
+            rows = slice(start, start + batch)
+            pred, ok = raw.predict(theta[rows], k)
+            centre = 0.5 * np.log(ss[rows, g.start] / n_clean)
+            part = log_marginal_over_scale(lambda u, r: mixture_log_likelihood(pred[r], obs, W, u),
+                                           np.where(ok, centre, 0.0), model.n_coords)
+            out[rows] += np.where(ok, part, -np.inf)
+    return out
+
+
+def weighted_quantiles(x: np.ndarray, w: np.ndarray, q) -> np.ndarray:
+    """Quantiles ``q`` of draws ``x`` (S,) with normalised weights ``w`` (S,): the weighted empirical CDF,
+    each draw at the midpoint of its weight's step, interpolated linearly (equal weights: the usual
+    Hazen quantiles)."""
+    order = np.argsort(x)
+    xs, ws = x[order], w[order]
+    cdf = np.cumsum(ws) - 0.5 * ws
+    return np.interp(q, cdf, xs)
+
+
+def _moments(x: np.ndarray, w: np.ndarray) -> dict:
+    mean = float(np.sum(w * x))
+    q05, q50, q95 = weighted_quantiles(x, w, [0.05, 0.5, 0.95])
+    return {"mean": mean, "sd": float(np.sqrt(np.sum(w * (x - mean) ** 2))), "q05": float(q05),
+            "q50": float(q50), "q95": float(q95)}
+
+
+@dataclass
+class JudgementAverage:
+    """The posterior averaged over the judgement of gross errors, beside the conditional one (module docstring).
+
+    Attributes
+    ----------
+    draws : int
+        Posterior draws reweighted (a random subset of the run's).
+    failed : int
+        Draws whose simulation failed (weight 0).
+    pareto_k : float
+        PSIS shape k̂ of the weights.
+    ess : float
+        Effective sample size of the smoothed weights, 1 / Σ w².
+    reliable : bool
+        k̂ ≤ :data:`PARETO_K_MAX`: the ``averaged`` summaries are the averaged posterior's.
+    conditional, averaged : dict
+        {parameter: {mean, sd, q05, q50, q95}} of the same draws, equally weighted (the posterior given the
+        judgement) and with the smoothed weights (averaged over the judgement; empty when not ``reliable``).
+    """
+
+    draws: int
+    failed: int
+    pareto_k: float
+    ess: float
+    reliable: bool
+    conditional: dict
+    averaged: dict
+
+    def to_dict(self) -> dict:
+        return asdict(self) | {"pareto_k_max": PARETO_K_MAX,
+                               "method": "PSIS importance sampling of the conditional posterior's draws to the "
+                                         "inlier/outlier/swap mixture likelihood, σ integrated out"}
+
+    def lines(self) -> list[str]:
+        """Log lines: the weights' diagnostics, then one line per parameter whose sd or median changes."""
+        head = (f"averaged over the judgement: {self.draws} draws reweighted, Pareto k̂ {self.pareto_k:.2f}, "
+                f"ESS {self.ess:.0f}")
+        if not self.reliable:
+            return [head + f" — k̂ above {PARETO_K_MAX}: the weights cannot be trusted; the posterior reported is "
+                           "conditional on the judgement"]
+        out = [head]
+        for name, c in self.conditional.items():
+            a = self.averaged[name]
+            out.append(f"  {name}: median {c['q50']:.5g} → {a['q50']:.5g}, sd {c['sd']:.3g} → {a['sd']:.3g} "
+                       f"(×{a['sd'] / c['sd']:.3f})")
+        return out
+
+
+def average_over_judgement(raw: Problem, clean: Problem, theta: np.ndarray, ss: np.ndarray, names: list[str],
+                           rng: np.random.Generator, draws: int = JUDGEMENT_DRAWS) -> JudgementAverage:
+    """The posterior averaged over the judgement of outliers and swaps, from the conditional posterior's draws.
+
+    Parameters
+    ----------
+    raw, clean : Problem
+        As for :func:`judgement_log_weights`.
+    theta : (S, dim) array
+        The run's posterior draws (on ``clean``).
+    ss : (S, n_groups) array
+        Their effective sums of squares (the sampler's blobs).
+    names : list of str
+        Parameters to summarise.
+    rng : numpy.random.Generator
+        Picks the draws reweighted.
+    draws : int
+        At most this many draws.
+
+    Returns
+    -------
+    JudgementAverage
+    """
+    import arviz as az
+    pick = np.sort(rng.choice(theta.shape[0], size=min(draws, theta.shape[0]), replace=False))
+    th, lw = theta[pick], judgement_log_weights(raw, clean, theta[pick], ss[pick])
+    keep = np.isfinite(lw)                                      # a failed simulation: weight 0
+    failed, th, lw = int(np.sum(~keep)), th[keep], lw[keep]
+    smoothed, k = az.psislw(lw - np.max(lw))
+    w = np.exp(smoothed - np.logaddexp.reduce(smoothed))
+    k = float(k)
+    reliable = bool(k <= PARETO_K_MAX)
+    idx = [clean.names.index(n) for n in names]
+    equal = np.full(th.shape[0], 1.0 / th.shape[0])
+    conditional = {n: _moments(th[:, i], equal) for n, i in zip(names, idx)}
+    averaged = {n: _moments(th[:, i], w) for n, i in zip(names, idx)} if reliable else {}
+    return JudgementAverage(draws=int(th.shape[0]), failed=failed, pareto_k=k, ess=float(1.0 / np.sum(w * w)),
+                            reliable=reliable, conditional=conditional, averaged=averaged)

@@ -1,8 +1,9 @@
 """The sampling job of ``bayes-disc sample``: least squares, then emcee.
 
 Writes summary.json, posterior.nc, run_info.json and the least-squares result into the run's output folder
-(and ``flagged.json``, the points judged outliers and frames judged label-swapped, for ``robust`` marker
-noise: :mod:`.robust`).
+(and ``flagged.json``, the points judged outliers and frames judged label-swapped, and
+``judgement_average.json``, the posterior averaged over that judgement, for ``robust`` marker noise:
+:mod:`.robust`).
 The HTML report is not this module's business: :mod:`bayes_disc.pipeline` runs this job, then the report.
 Progress goes to the module's logger (INFO): a line when each stage starts and one when it ends, with
 its duration (:func:`stage`); a line per least-squares start; a bar over the profile likelihoods and one
@@ -35,8 +36,8 @@ from .inertial import load_run_throws
 from .leastsq import fit_least_squares
 from .results import build_inference_data, build_summary, format_table, prior_record, writing_posterior
 from .profile import profile_paths
-from .robust import (FLAGGED, gross_error_advice, robust_flights, robust_refit, suspected_gross_errors,
-                     with_saved_flags)
+from .robust import (FLAGGED, JUDGEMENT_AVERAGE, average_over_judgement, gross_error_advice, robust_flights,
+                     robust_refit, suspected_gross_errors, with_saved_flags)
 from .proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
 from .sampler import n_walkers, run_sampler, saved_steps
 from .versions import software_versions
@@ -283,6 +284,21 @@ def _robust(problem, ls, ls_dict: dict, cfg: RunConfig, out: Path):
     return problem, ls, ls_dict
 
 
+def _average_over_judgement(raw, problem, chains, cfg: RunConfig, out: Path) -> None:
+    """The posterior averaged over the judgement of outliers and swaps (:func:`.robust.average_over_judgement`):
+    written to ``judgement_average.json`` and logged."""
+    names = problem.names[: problem.n_coef + problem.n_ext]
+    with stage("averaging over the judgement", "reweighting draws to the inlier/outlier/swap mixture likelihood") as st:
+        avg = average_over_judgement(raw, problem, chains.chain.reshape(-1, problem.dim),
+                                     chains.ss.reshape(-1, problem.n_groups), names,
+                                     np.random.default_rng(cfg.sampler.seed))
+        (out / JUDGEMENT_AVERAGE).write_text(json.dumps(avg.to_dict(), indent=1))
+        for line in avg.lines():
+            logger.info(line)
+        st.result = (f"Pareto k̂ {avg.pareto_k:.2f}, " + ("the averaged posterior is in " if avg.reliable else
+                     "weights not trusted; see ") + str(out / JUDGEMENT_AVERAGE))
+
+
 def posterior_approximation(problem, ls, processes: int, out: Path, progress: bool = False):
     """Profile paths of the coefficients through the least-squares optimum and the ridge-aware
     independence proposal built from them (:func:`.proposals.independence_proposal`).
@@ -373,7 +389,7 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
     out.mkdir(parents=True, exist_ok=True)
     with stage("reading flights and checks") as st:
         throws = load_run_throws(cfg) if cfg.imu else []
-        problem = build_problem(cfg, throws=throws)
+        problem = raw = build_problem(cfg, throws=throws)
         if resume and robust_flights(problem) and (out / FLAGGED).is_file() and (out / "chains" / RUN_KEY).is_file():
             problem = with_saved_flags(problem, out)
             logger.info(f"resume: the saved judgement of outliers and label swaps ({out / FLAGGED}) is applied")
@@ -411,6 +427,8 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
                            f"ESS ≥ {s.ess:g}, N/τ ≥ {s.n_tau:g} (cap {s.max_steps} steps)") as st:
         chains = run_sampler(problem, proposal, cfg.sampler, out, resume=steps is not None, progress=progress)
         st.result = f"{chains.reason} at step {chains.total_steps}"
+    if robust_flights(raw):
+        _average_over_judgement(raw, problem, chains, cfg, out)
     with stage("outputs", "summary.json, posterior.nc, run_info.json"):
         info = {"name": cfg.name, "config": str(cfg.path), "flights": flight_info(problem),
                 "sampler_settings": asdict(cfg.sampler), "markers": cfg.markers, "noise": noise_info(problem)}

@@ -239,7 +239,8 @@ def _advance(task) -> int:
 @dataclass
 class Chains:
     """Post-burn-in samples: chain (n_ensembles, n_steps, n_walkers, dim), log_prob alike without dim,
-    σ per noise group (n_ensembles, n_steps, n_walkers, n_groups) drawn from its exact conditional."""
+    σ per noise group (n_ensembles, n_steps, n_walkers, n_groups) drawn from its exact conditional, and the
+    effective sums of squares S̃_g it was drawn from (alike; the sampler's blobs; None when not kept)."""
 
     chain: np.ndarray
     log_prob: np.ndarray
@@ -252,6 +253,7 @@ class Chains:
     reason: str
     history: list = field(default_factory=list)
     wall_time_s: float = 0.0
+    ss: np.ndarray | None = None
 
 
 class StoredChains:
@@ -756,4 +758,4 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
     hist_path.write_text(json.dumps(history, indent=1))
     return Chains(chain=chain, log_prob=lp, sigma=sigma, acceptance=acc, burn=burn,
                   total_steps=total, tau=verdict["tau"], converged=verdict["converged"], reason=reason,
-                  history=history, wall_time_s=time.perf_counter() - t_start)
+                  history=history, wall_time_s=time.perf_counter() - t_start, ss=ss)

@@ -575,14 +575,18 @@ MAX_FLAG_ROWS = 40
 
 def flagged_section(ctx) -> Section | None:
     """Points judged gross outliers and frames judged label-swapped by the ``robust`` noise model
-    (``flagged.json``); None for runs without robust flights."""
+    (``flagged.json``: {flight: {"outliers": [...], "swaps": [...]}}), and the posterior averaged over that
+    judgement beside the one given it (``judgement_average.json``); None for runs without robust flights."""
     data = ctx.run.extras.get("flagged")
     if not data:
         return None
-    outliers, swaps = data.get("outliers", []), data.get("swaps", [])
+    outliers = [r for f in data.values() for r in f.get("outliers", [])]
+    swaps = [r for f in data.values() for r in f.get("swaps", [])]
     guide = ("Recorded points the robust noise model judged gross errors (removed before sampling) and frames "
              "whose marker labels it judged exchanged (restored), each with its probability at the "
-             "least-squares optimum. The posterior is conditional on this judgement.")
+             "least-squares optimum. The sampled posterior is conditional on this judgement; the last table "
+             "gives the posterior averaged over every judgement (the inlier/outlier/swap mixture as the "
+             "likelihood of the data as recorded), by importance sampling of the sampled draws.")
     flights = sorted({r["flight"] for r in outliers} | {r["flight"] for r in swaps})
     counts = table(["flight", "outlying points", "swapped frames"],
                    [[f, sum(r["flight"] == f for r in outliers), sum(r["flight"] == f for r in swaps)]
@@ -599,4 +603,20 @@ def flagged_section(ctx) -> Section | None:
             ["flight", "t [s]", "markers exchanged", "probability"],
             [[r["flight"], f"{r['t']:.4f}", " ↔ ".join(map(str, r["markers"])), f"{r['probability']:.3f}"]
              for r in swaps[:MAX_FLAG_ROWS]]))
+    avg = ctx.run.extras.get("judgement_average")
+    if avg:
+        head = (f"<h3>Averaged over the judgement</h3><p>{avg['draws']} posterior draws reweighted; Pareto "
+                f"k̂ of the weights {avg['pareto_k']:.2f}, effective sample size {avg['ess']:.0f}.")
+        if not avg["reliable"]:
+            parts.append(head + f" With k̂ above {avg['pareto_k_max']} the weights cannot be trusted: the "
+                         "judgement matters more than these draws can tell, and only the posterior given it is "
+                         "reported.</p>")
+        else:
+            rows = []
+            for name, c in avg["conditional"].items():
+                a = avg["averaged"][name]
+                rows.append([name, f"{c['q50']:.4g}", f"{a['q50']:.4g}", f"{c['q05']:.4g} … {c['q95']:.4g}",
+                             f"{a['q05']:.4g} … {a['q95']:.4g}", f"{a['sd'] / c['sd']:.3f}"])
+            parts.append(head + "</p>" + table(["parameter", "median given the judgement", "median averaged",
+                                                 "90 % given the judgement", "90 % averaged", "sd ratio"], rows, "num"))
     return Section("flagged", "Data judged bad", guide, "".join(parts))

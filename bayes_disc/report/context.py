@@ -108,7 +108,7 @@ def load_run(run_dir) -> RunData:
     if cfg.truth is not None:
         truth = _read_json(Path(cfg.truth))
     extras = {}
-    for stem in ("identifiability", "diagnosis", "flagged"):
+    for stem in ("identifiability", "diagnosis", "flagged", "judgement_average"):
         extras[stem] = _read_json(run_dir / f"{stem}.json", required=False)
     return RunData(run_dir=run_dir, summary=summary, idata=idata, run_info=run_info, config_path=config_path,
                    truth=truth, extras=extras)

@@ -108,6 +108,12 @@ class PointScales:
             return e / self.scale[None, :, None]
         return np.einsum("pij,bpj->bpi", np.linalg.inv(self.whiten_matrix), e)
 
+    def matrices(self) -> np.ndarray:
+        """(P, 3, 3) the per-point whitening maps W_i (e_i = W_i r_i; :meth:`apply`)."""
+        if self.scale is not None:
+            return self.scale[:, None, None] * np.eye(3)
+        return self.whiten_matrix
+
     def log_diagonal(self) -> np.ndarray:
         """(P, 3) log of the diagonal of the per-point whitening (sums to 0 up to rounding)."""
         if self.scale is not None:

@@ -21,7 +21,19 @@ from, and the judgement hardly depends on it — a 2 cm error at σ = 2 mm has a
 
 Points and frames with probability > 0.5 are flagged; the fit then drops the outlying points and
 restores the swapped labels (:func:`clean_flight`) and is repeated until the flags no longer change
-(:mod:`bayes_disc.inference.robust`). The posterior is then conditional on that classification.
+(:mod:`bayes_disc.inference.robust`). The posterior sampled is then conditional on that classification.
+
+The posterior averaged over every classification uses the mixture as the likelihood of the recording as
+given (:func:`mixture_log_likelihood`), with σ_f integrated out under p(σ_f) ∝ 1/σ_f
+(:func:`log_marginal_over_scale`):
+
+    p(y | θ, σ) = Π_frames [ (1 − π_s) Π_i p(r_i | H₀) + Σ_(j,l) (π_s / n_pairs) Π_i p(r_i | H_jl) ],
+    p(r_i | H) = (1 − π) |W_i| N(W_i r_i | 0, σ² I₃) + π N(r_i | 0, w² I₃),
+    p(y | θ)   = ∫ p(y | θ, σ) dσ/σ,
+
+W_i the observation's whitening (per-point errors, :mod:`.noise`; I without them), which travels with the
+observation under a swap. :func:`bayes_disc.inference.robust.average_over_judgement` reweights the
+conditional posterior's draws to it.
 """
 from __future__ import annotations
 
@@ -30,6 +42,8 @@ from itertools import combinations
 
 import numpy as np
 from scipy.special import logsumexp
+
+from ._outlier_kernels import mixture_frames
 
 #: prior probability that a point is a gross error
 OUTLIER_FRACTION = 0.01
@@ -147,6 +161,113 @@ def classify(flight: str, times: np.ndarray, marker_ids, predicted: np.ndarray, 
     outlier = np.einsum("nh,hnm->nm", post, np.exp(np.stack(out_h)))
     return Classification(flight=flight, times=np.asarray(times), marker_ids=tuple(marker_ids),
                           outlier=np.where(seen, outlier, np.nan), pairs=pairs, swap=post[:, 1:])
+
+
+def mixture_log_likelihood(predicted: np.ndarray, observed: np.ndarray, whiten: np.ndarray | None,
+                           log_sigma: np.ndarray, outlier_fraction: float = OUTLIER_FRACTION,
+                           width: float = OUTLIER_WIDTH_M, swap_fraction: float = SWAP_FRACTION) -> np.ndarray:
+    """log p(y | θ, σ) of one flight's recording as given under the inlier/outlier/swap mixture (module
+    docstring), for B predictions at Q noise scales each.
+
+    Parameters
+    ----------
+    predicted : (B, n, m, 3) array
+        Predicted markers [m].
+    observed : (n, m, 3) array
+        The recording [m], NaN where unseen.
+    whiten : (n, m, 3, 3) array or None
+        W_i of each observation (e = W_i r is N(0, σ² I₃) for an inlier; per-point errors), None for I.
+    log_sigma : (B, Q) array
+        ln σ [ln m] at which to evaluate, per prediction.
+    outlier_fraction, width, swap_fraction : float
+        π, w [m] and π_s.
+
+    Returns
+    -------
+    (B, Q) array
+    """
+    B, n, m, _ = predicted.shape
+    seen = np.all(np.isfinite(observed), axis=-1)                       # (n, m)
+    obs = np.where(seen[..., None], observed, 0.0)
+    r = predicted[:, :, :, None, :] - obs[None, :, None, :, :]         # (B, n, a, l, 3): marker a vs label l
+    r2 = np.sum(r * r, axis=-1)
+    if whiten is None:
+        e2, log_w = r2, np.zeros((n, m))
+    else:
+        e = np.einsum("nlij,bnalj->bnali", whiten, r)
+        e2, log_w = np.sum(e * e, axis=-1), np.linalg.slogdet(whiten)[1]
+    n_pairs = max(m * (m - 1) // 2, 1)
+    with np.errstate(divide="ignore"):                                  # π or π_s = 0: the Gaussian limit
+        logs = (np.log1p(-outlier_fraction) - 1.5 * np.log(2 * np.pi),
+                np.log(outlier_fraction) - 1.5 * np.log(2 * np.pi * width ** 2),
+                np.log1p(-swap_fraction), np.log(swap_fraction / n_pairs))
+    return mixture_frames(np.ascontiguousarray(e2), np.ascontiguousarray(r2), log_w, seen,
+                          np.ascontiguousarray(log_sigma, dtype=float), logs[0], logs[1], 1.0 / width ** 2,
+                          logs[2], logs[3])
+
+
+#: nodes of the trapezoid rule in ln σ (:func:`log_marginal_over_scale`), and its half-width in units of the
+#: Gaussian likelihood's sd in ln σ, 1/√(2N): node spacing 0.5 of it, at which the rule's error for a
+#: Gaussian integrand is ~e^(−79); with the peak within one sd of the centre the range leaves out < e^(−24)
+SCALE_NODES = 33
+SCALE_HALF_WIDTH = 8.0
+
+
+def log_marginal_over_scale(log_lik, centre: np.ndarray, n_coords: int, max_moves: int = 12) -> np.ndarray:
+    """log ∫ p(y | θ, σ) dσ/σ = log ∫ p(y | θ, e^u) du by the trapezoid rule in u = ln σ.
+
+    The nodes span ± :data:`SCALE_HALF_WIDTH` / √(2N) (N = ``n_coords``: the width of a Gaussian
+    likelihood's peak in ln σ is 1/√(2N)) around a centre. The rule is applied once the highest node is
+    within one such width of the centre (≥ 7 widths of the peak on either side); otherwise the grid moves
+    to the highest node, and where that node is an end of the grid the next grid is 4× wider (coarse) until
+    the peak is bracketed, then narrow again.
+
+    Parameters
+    ----------
+    log_lik : callable
+        ``log_lik(u, rows)``: log p(y | θ, σ) (b, Q) of the predictions ``rows`` (b,) at ln σ = u (b, Q).
+    centre : (B,) array
+        A first guess of the peak in ln σ (e.g. ½ ln(S/N) of a Gaussian fit).
+    n_coords : int
+        Number of observed coordinates N.
+    max_moves : int
+        Most moves of a grid.
+
+    Returns
+    -------
+    (B,) array
+        −inf where the likelihood is zero at every node.
+
+    Raises
+    ------
+    RuntimeError
+        If a peak is not centred after ``max_moves`` moves.
+    """
+    offsets = np.linspace(-1.0, 1.0, SCALE_NODES) * SCALE_HALF_WIDTH / np.sqrt(2.0 * n_coords)
+    mid = SCALE_NODES // 2
+    weights = np.full(SCALE_NODES, np.log(offsets[1] - offsets[0]))
+    weights[[0, -1]] -= np.log(2.0)
+    centre = np.asarray(centre, float).copy()
+    span = np.ones(centre.size)
+    out = np.full(centre.size, np.nan)
+    todo = np.arange(centre.size)
+    for _ in range(max_moves + 1):
+        u = centre[todo, None] + span[todo, None] * offsets[None]
+        ll = log_lik(u, todo)
+        peak = np.argmax(ll, axis=1)
+        done = ~np.isfinite(ll.max(axis=1)) | ((span[todo] == 1.0) & (np.abs(peak - mid) <= 2))
+        with np.errstate(invalid="ignore"):
+            out[todo[done]] = logsumexp(ll[done] + weights, axis=1)
+        rest = ~done
+        edge = rest & ((peak == 0) | (peak == SCALE_NODES - 1))
+        centre[todo[rest]] = u[rest, peak[rest]]
+        span[todo[edge]] *= 4.0
+        span[todo[rest & ~edge]] = 1.0
+        todo = todo[rest]
+        if todo.size == 0:
+            return out
+    raise RuntimeError(f"log_marginal_over_scale: the likelihood's peak in ln σ not centred for {todo.size} "
+                       f"prediction(s) after {max_moves} moves")
 
 
 def clean_flight(data, records: dict):
