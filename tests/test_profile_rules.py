@@ -34,3 +34,18 @@ def test_a_side_stops_where_the_profile_or_else_the_marginal_says():
     assert not side_done(5, MAX_DEVIANCE + 6, 2.0 - 0.5 * MAX_DEVIANCE + 0.01, 2.0)
     # a cliff or failed fit ends the side whatever the marginal
     assert side_done(2, FAILED_DEVIANCE_FACTOR * MAX_DEVIANCE + 1, 10.0, 10.0)
+
+
+def test_conditional_start_is_the_constrained_optimum_of_a_quadratic():
+    """For a Gaussian posterior (quadratic cost ½ (x − μ)ᵀ H (x − μ)) the start of a profile fit is its exact
+    optimum with θ_i held: the free block solves H_ff (x_f − μ_f) = −H_fi (v − μ_i)."""
+    from bayes_disc.inference.profile import conditional_start
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(6, 6))
+    H = A @ A.T + 6 * np.eye(6)
+    mu, i, v = rng.normal(size=6), 2, 1.7
+    free = np.arange(6) != i
+    want = mu.copy()
+    want[i] = v
+    want[free] = mu[free] - np.linalg.solve(H[np.ix_(free, free)], H[free, i] * (v - mu[i]))
+    np.testing.assert_allclose(conditional_start(mu, np.linalg.inv(H), i, v), want, rtol=1e-10, atol=1e-12)
