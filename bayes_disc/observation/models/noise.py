@@ -30,8 +30,10 @@ Units (``noise.model`` in the run configuration):
   (outside it the likelihood is zero).
 * ``robust`` (:class:`RobustNoise`): the ``gaussian`` likelihood on the data cleaned of gross errors —
   points judged outliers are dropped and frames judged label-swapped restored by an inlier/outlier and
-  swap mixture (:mod:`.outliers`, repeated with the fit until the judgement is stable); the posterior is
-  conditional on that judgement.
+  swap mixture (:mod:`.outliers`, repeated with the fit until the judgement is stable); the sampled
+  posterior is conditional on that judgement, and its draws are then reweighted to the posterior averaged
+  over every judgement (:func:`.outliers.mixture_log_likelihood`,
+  :func:`bayes_disc.inference.robust.average_over_judgement`).
 
 Per-point errors (``noise.per_point``), :class:`PointScales`: a per-row ``sigma_m`` s_i [m] (the same for
 x, y and z), or the covariance Σ_i [m²] (columns ``cov_xx … cov_zz`` written by ``bayes-disc track``),
