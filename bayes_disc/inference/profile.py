@@ -214,11 +214,12 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
     through the least-squares optimum ``theta_hat`` (noise ``sigma``, covariance ``cov_hat``).
 
     Steps are one local sd of θ_i (from the local covariance, at least half the optimum's sd), each fit
-    started from the previous point moved along its local covariance (:func:`_fixed_fit`). The side stops when a fit fails, past ``FAILED_DEVIANCE_FACTOR`` ·
-    ``max_deviance``, after ``max_points`` points while the deviance stays below ``max_deviance``, and past
-    ``max_deviance`` once the Laplace marginal ln g (module docstring) has fallen by ``max_deviance``/2 from
-    its highest value on that side, or after ``extended_points`` points (:func:`side_done`). The two sides
-    start from θ̂ and do not depend on each other.
+    started from the previous point moved along its local covariance (:func:`_fixed_fit`). The side stops
+    when a fit fails, past ``FAILED_DEVIANCE_FACTOR`` · ``max_deviance``, after ``max_points`` points while
+    the deviance stays below ``max_deviance``, and past ``max_deviance`` once the Laplace marginal ln g
+    (module docstring) has fallen by ``max_deviance``/2 from its highest value on that side, or after
+    ``extended_points`` points (:func:`side_done`). The two sides start from θ̂ and do not depend on each
+    other.
 
     Returns
     -------
