@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from bayes_disc.inference.profile import (EXTENDED_POINTS, FAILED_DEVIANCE_FACTOR, MAX_DEVIANCE, MAX_POINTS,
-                                          conditional_log_volume, side_done)
+from bayes_disc.inference.profile import (EXTENDED_POINTS, FAILED_DEVIANCE_FACTOR, MARGINAL_RISE, MAX_DEVIANCE,
+                                          MAX_POINTS, conditional_log_volume, side_done)
 
 
 def test_conditional_log_volume_is_half_the_log_determinant_of_the_conditional_covariance():
@@ -20,9 +20,16 @@ def test_conditional_log_volume_is_half_the_log_determinant_of_the_conditional_c
 
 
 def test_a_side_stops_where_the_profile_or_else_the_marginal_says():
-    # flat profile: max_points, as before
+    # flat profile: max_points, as before, when the marginal has not risen along the side
     assert not side_done(MAX_POINTS - 1, 2.0, -1.0, 0.0)
     assert side_done(MAX_POINTS, 2.0, -1.0, 0.0)
+    assert side_done(MAX_POINTS, 2.0, MARGINAL_RISE, MARGINAL_RISE)
+    # flat profile whose marginal rises (the valley widens): go on while ln g is within max_deviance/2 of its
+    # best, up to the cap
+    assert not side_done(MAX_POINTS, 2.7, 35.7, 35.7)
+    assert not side_done(MAX_POINTS + 2, 3.0, 36.0 - 0.5 * MAX_DEVIANCE + 0.01, 36.0)
+    assert side_done(MAX_POINTS + 2, 3.0, 36.0 - 0.5 * MAX_DEVIANCE - 0.01, 36.0)
+    assert side_done(EXTENDED_POINTS, 3.0, 40.0, 40.0)
     # the deviance has risen and so has fallen the marginal: stop at once
     assert side_done(3, MAX_DEVIANCE + 1, -0.5 * (MAX_DEVIANCE + 1), 0.0)
     # the deviance has risen but the valley widens (ln g still near its best): go on, up to the cap

@@ -22,7 +22,9 @@ which can keep rising while D does (24 synthetic flights: the marginal of CMq ha
 and 5 % of its mass beyond the end of a path that stopped at D = 18). A side therefore goes on past
 ``max_deviance`` while ln g has fallen by less than ``max_deviance``/2 from its highest value on that side
 (at most :data:`EXTENDED_POINTS` points; :func:`side_done`), so that the ridge proposal built on it covers
-the marginal's mass.
+the marginal's mass. The same holds where the profile stays flat but ln g rises (the valley widens faster
+than the deviance grows): a flat side goes on past :data:`MAX_POINTS` once ln g has risen by more than
+:data:`MARGINAL_RISE` along it, until it has fallen by ``max_deviance``/2 from its best.
 """
 from __future__ import annotations
 
@@ -40,6 +42,10 @@ MAX_DEVIANCE = 12.0
 MAX_POINTS = 6
 #: at most this many points on a side that goes on because the Laplace marginal ln g has not yet fallen
 EXTENDED_POINTS = 12
+#: a flat side (deviance ≤ MAX_DEVIANCE) goes on past MAX_POINTS when ln g has risen by more than this along
+#: it: the marginal's mass lies away from the optimum (12 synthetic flights, seed 19 of ``bench_scale.py``: CMq's
+#: profile deviance 2.7 after six points on its low side while ln g rose by 36, the walkers 11 Laplace sds out)
+MARGINAL_RISE = 1.0
 #: a profile fit stops when a step lowers the deviance by less than this (the deviances are read to ~0.01; the
 #: relative tolerance of a full fit would spend the evaluation budget on digits no verdict uses)
 DEVIANCE_TOL = 1e-3
@@ -153,14 +159,17 @@ def side_done(n_points: int, deviance: float, log_g: float, best: float, max_dev
     -------
     bool
         True past ``FAILED_DEVIANCE_FACTOR`` · ``max_deviance`` (a cliff or a failed fit); after
-        ``max_points`` points while D ≤ ``max_deviance`` (a flat profile); once D > ``max_deviance`` and
-        ln g < ``best`` − ``max_deviance``/2 (the marginal has fallen too), or after ``extended_points``.
+        ``max_points`` points while D ≤ ``max_deviance`` (a flat profile) unless ln g has risen by more
+        than :data:`MARGINAL_RISE` on this side (``best``) and not yet fallen by ``max_deviance``/2 from
+        it; once D > ``max_deviance`` and ln g < ``best`` − ``max_deviance``/2 (the marginal has fallen
+        too); always after ``extended_points``.
     """
-    if deviance > FAILED_DEVIANCE_FACTOR * max_deviance:
+    if deviance > FAILED_DEVIANCE_FACTOR * max_deviance or n_points >= extended_points:
         return True
+    fallen = log_g < best - 0.5 * max_deviance
     if deviance <= max_deviance:
-        return n_points >= max_points
-    return log_g < best - 0.5 * max_deviance or n_points >= extended_points
+        return n_points >= max_points and (best <= MARGINAL_RISE or fallen)
+    return fallen
 
 
 def conditional_start(x: np.ndarray, cov: np.ndarray, index: int, value: float) -> np.ndarray:
