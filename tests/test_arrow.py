@@ -122,3 +122,56 @@ def test_held_parameters_stay_put(small_problem):
     res = minimise(p, x0, p.nominal_noise, free=free, max_nfev=30)
     assert res.x[0] == x0[0] and res.x[p.ic_start] == x0[p.ic_start]
     assert res.cost < 0.5 * np.sum(whitened_residuals(x0, p, p.nominal_noise) ** 2)
+
+
+class _SharpProblem:
+    """The parts of a Problem that jacobian_blocks reads, for two flights whose residuals
+    r_k,j = sin(ω θ_0 t_j) + θ_(1+k) t_j² (θ_0 shared, θ_(1+k) flight k's own) have a known Jacobian; ω sets how
+    sharply the data pin θ_0 down (the default step 1e-4 of the prior sd spans ω·1e-4 radians per unit t)."""
+
+    ic_start, n_flights = 1, 2
+
+    def __init__(self, omega: float):
+        self.omega = omega
+        self.t = np.linspace(0.1, 1.0, 25)
+        self.prior_sd = np.array([1.0, 2.0, 2.0])
+        self.prior_mean = np.zeros(3)
+
+        class _Layout:
+            @staticmethod
+            def flight_slice(k):
+                return slice(1 + k, 2 + k)
+        self.layout = _Layout()
+
+    def residual_groups(self, k):
+        return np.full(self.t.size, k)
+
+    def noise_residuals(self, theta, k):
+        theta = np.atleast_2d(theta)
+        r = np.sin(self.omega * theta[:, :1] * self.t) + theta[:, 1 + k: 2 + k] * self.t ** 2
+        return r, np.ones(theta.shape[0], bool)
+
+    def exact(self, x, sigma):
+        rows = []
+        for k in range(2):
+            d0 = self.omega * self.t * np.cos(self.omega * x[0] * self.t)
+            rows.append(np.c_[d0, self.t ** 2] / sigma[k])
+        return rows
+
+
+@pytest.mark.parametrize("omega", [1.0, 3e4])
+def test_jacobian_columns_that_bend_over_the_step_are_recomputed_with_smaller_steps(omega):
+    """Where the residuals are linear over the default step the Jacobian is the plain central difference;
+    where a parameter is pinned down far below its prior scale (ω = 3·10⁴: the step spans 3 radians, as CRr's
+    did on the inertial logs) the central difference across the bend is wrong by O(1) and the recomputed
+    column matches the exact derivative."""
+    problem = _SharpProblem(omega)
+    x, sigma = np.array([0.37, 0.5, -0.2]), np.array([0.1, 0.2])
+    J = jacobian_blocks(x, problem, sigma)
+    for got, want in zip(J.blocks, problem.exact(x, sigma)):
+        np.testing.assert_allclose(got, want, rtol=2e-3, atol=1e-6 * np.abs(want).max())
+    # the plain central difference with the default step, for comparison: exact for ω = 1, far off for 3·10⁴
+    h = 1e-4 * problem.prior_sd[0]
+    central = (np.sin(omega * (x[0] + h) * problem.t) - np.sin(omega * (x[0] - h) * problem.t)) / (2 * h) / sigma[0]
+    error = np.abs(central - problem.exact(x, sigma)[0][:, 0]).max() / np.abs(problem.exact(x, sigma)[0][:, 0]).max()
+    assert (error < 1e-6) if omega == 1.0 else (error > 0.3)
