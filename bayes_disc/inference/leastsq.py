@@ -50,37 +50,51 @@ def _steps(problem: Problem, x: np.ndarray) -> np.ndarray:
 
 #: a Jacobian column is recomputed with a step ten times smaller while its one-sided differences disagree by
 #: more than this share of their mean: |d⁺ − d⁻| > NONLINEARITY_MAX · |d⁺ + d⁻|/2 (central differences are
-#: then off by a comparable share; the inertial logs of runs/flatball: CRr's step was 138 of its
-#: conditional sds, its gradient pointed uphill and least squares stopped 29 short of the optimum's cost)
+#: then off by a comparable share; on the inertial logs of runs/flatball CRr's default step was 138 of its
+#: conditional sds, the gradient pointed uphill and least squares stalled with lower costs within reach)
 NONLINEARITY_MAX = 0.05
 #: at most this many tenfold reductions of a column's step
 STEP_REDUCTIONS = 4
 
 
 def _flight_columns(x: np.ndarray, problem: Problem, sigma: np.ndarray, k: int, cols: np.ndarray,
-                    h: np.ndarray, centre: np.ndarray | None):
-    """Flight k's whitened residual derivatives (n_k, c) along θ columns ``cols`` (c,) with steps ``h`` (c,):
-    central differences, and where ``centre`` (flight k's effective residuals at x) is given also the
-    columns' nonlinearity |d⁺ − d⁻| and mean slope |d⁺ + d⁻|/2 (sums of squares over the rows, (c,) each).
-    A lane whose simulation failed gives a zero column."""
+                    h: np.ndarray, centre: np.ndarray | None = None):
+    """Flight k's whitened residual derivatives along θ columns ``cols`` (c,) with steps ``h`` (c,).
+
+    Parameters
+    ----------
+    centre : (n_k,) array, optional
+        Flight k's effective residuals at x; if None they are simulated in the same batch (one more lane).
+
+    Returns
+    -------
+    d : (c, n_k) array
+        Central differences (a column whose lanes' simulation failed is zero).
+    bend, slope : (c,) arrays
+        |d⁺ − d⁻|² and |d⁺ + d⁻|²/4 summed over the rows, d± the one-sided differences (zero for a failed
+        column, or where the centre's simulation failed).
+    centre : (n_k,) array or None
+        The residuals at x (None if that simulation failed).
+    """
     w = sigma[problem.residual_groups(k)]
     if cols.size == 0:
-        return np.zeros((0, w.size)), np.zeros(0), np.zeros(0)
-    lanes = np.repeat(x[None], 2 * cols.size, axis=0)
+        return np.zeros((0, w.size)), np.zeros(0), np.zeros(0), centre
+    lanes = np.repeat(x[None], 2 * cols.size + (centre is None), axis=0)
     lanes[np.arange(cols.size), cols] += h
     lanes[cols.size + np.arange(cols.size), cols] -= h
     r, ok = problem.noise_residuals(lanes, k)
-    plus, minus = r[: cols.size], r[cols.size:]
-    d = (plus - minus) / (2 * h)[:, None] / w
-    good = ok[: cols.size] & ok[cols.size:]
-    d[~good] = 0.0
     if centre is None:
-        return d, None, None
-    dp, dm = (plus - centre) / w, (centre - minus) / w
-    bend = np.sum((dp - dm) ** 2, axis=1)
-    slope = np.sum((0.5 * (dp + dm)) ** 2, axis=1)
-    bend[~good], slope[~good] = 0.0, 0.0
-    return d, bend, slope
+        centre = r[-1] if ok[-1] else None
+    plus, minus = r[: cols.size], r[cols.size: 2 * cols.size]
+    good = ok[: cols.size] & ok[cols.size: 2 * cols.size]
+    d = (plus - minus) / (2 * h)[:, None] / w
+    d[~good] = 0.0
+    bend, slope = np.zeros(cols.size), np.zeros(cols.size)
+    if centre is not None:
+        dp, dm = (plus - centre) / w, (centre - minus) / w
+        bend[good] = np.sum((dp - dm)[good] ** 2, axis=1)
+        slope[good] = np.sum((0.5 * (dp + dm))[good] ** 2, axis=1)
+    return d, bend, slope, centre
 
 
 def flight_residuals(x: np.ndarray, problem: Problem, sigma: np.ndarray) -> list[np.ndarray]:
@@ -101,7 +115,8 @@ def whitened_residuals(x: np.ndarray, problem: Problem, sigma: np.ndarray) -> np
 
 def jacobian_blocks(x: np.ndarray, problem: Problem, sigma: np.ndarray, free: np.ndarray | None = None) -> ArrowJacobian:
     """The whitened Jacobian in block-arrow form (:mod:`.arrow`) over the ``free`` parameters (default:
-    all): central differences, one batched simulation per flight (2 lanes per free parameter it depends on).
+    all): central differences, one batched simulation per flight (2 lanes per free parameter it depends on,
+    and one at x).
 
     Steps start at :func:`_steps`; a column whose one-sided differences disagree by more than
     :data:`NONLINEARITY_MAX` of their mean (summed over the flights) is recomputed with a step ten times
@@ -130,15 +145,13 @@ def jacobian_blocks(x: np.ndarray, problem: Problem, sigma: np.ndarray, free: np
     shared_cols = np.flatnonzero(free[: problem.ic_start])
     cols = [np.r_[shared_cols, problem.layout.flight_slice(k).start + np.flatnonzero(free[problem.layout.flight_slice(k)])]
             for k in range(problem.n_flights)]
-    centres = [problem.noise_residuals(x[None], k) for k in range(problem.n_flights)]
-    centres = [r[0] if ok[0] else None for r, ok in centres]
-    blocks, bend, slope = [], np.zeros(x.size), np.zeros(x.size)
+    blocks, centres, bend, slope = [], [], np.zeros(x.size), np.zeros(x.size)
     for k in range(problem.n_flights):
-        d, b, m = _flight_columns(x, problem, sigma, k, cols[k], h[cols[k]], centres[k])
+        d, b, m, centre = _flight_columns(x, problem, sigma, k, cols[k], h[cols[k]])
         blocks.append(d)
-        if b is not None:
-            np.add.at(bend, cols[k], b)
-            np.add.at(slope, cols[k], m)
+        centres.append(centre)
+        np.add.at(bend, cols[k], b)
+        np.add.at(slope, cols[k], m)
     # columns whose residuals bend over the step: recompute them (every flight they enter) with smaller steps
     for _ in range(STEP_REDUCTIONS):
         bent = np.flatnonzero(np.sqrt(bend) > NONLINEARITY_MAX * np.sqrt(slope))
@@ -148,13 +161,12 @@ def jacobian_blocks(x: np.ndarray, problem: Problem, sigma: np.ndarray, free: np
         bend[bent], slope[bent] = 0.0, 0.0
         for k in range(problem.n_flights):
             redo = np.flatnonzero(np.isin(cols[k], bent))
-            if redo.size == 0:
+            if redo.size == 0 or centres[k] is None:
                 continue
-            d, b, m = _flight_columns(x, problem, sigma, k, cols[k][redo], h[cols[k][redo]], centres[k])
+            d, b, m, _ = _flight_columns(x, problem, sigma, k, cols[k][redo], h[cols[k][redo]], centres[k])
             blocks[k][redo] = d
-            if b is not None:
-                np.add.at(bend, cols[k][redo], b)
-                np.add.at(slope, cols[k][redo], m)
+            np.add.at(bend, cols[k][redo], b)
+            np.add.at(slope, cols[k][redo], m)
     own = [position[c[shared_cols.size:]] for c in cols]
     return ArrowJacobian(shared=position[shared_cols], own=tuple(own),
                          blocks=tuple(np.ascontiguousarray(d.T) for d in blocks), prior=1.0 / problem.prior_sd[free])
