@@ -162,9 +162,9 @@ def side_done(n_points: int, deviance: float, log_g: float, best: float, max_dev
         ``max_points`` points while D ≤ ``max_deviance`` (a flat profile) unless ln g has risen by more
         than :data:`MARGINAL_RISE` on this side (``best``) and not yet fallen by ``max_deviance``/2 from
         it; once D > ``max_deviance`` and ln g < ``best`` − ``max_deviance``/2 (the marginal has fallen
-        too); always after ``extended_points``.
+        too); always after max(``max_points``, ``extended_points``).
     """
-    if deviance > FAILED_DEVIANCE_FACTOR * max_deviance or n_points >= extended_points:
+    if deviance > FAILED_DEVIANCE_FACTOR * max_deviance or n_points >= max(max_points, extended_points):
         return True
     fallen = log_g < best - 0.5 * max_deviance
     if deviance <= max_deviance:
