@@ -105,7 +105,8 @@ def main() -> None:
     for _ in range(a.repeats):
         t = time.perf_counter()
         avg = average_over_judgement(raw, clean, chain.reshape(-1, clean.dim), ss.reshape(-1, clean.n_groups), names,
-                                     np.random.default_rng(cfg.sampler.seed), draws=a.draws)
+                                     np.random.default_rng(cfg.sampler.seed), json.loads((out / "flagged.json").read_text()),
+                                     draws=a.draws)
         times.append(time.perf_counter() - t)
     print(f"averaging over the judgement: {avg.draws} draws, median {np.median(times):.2f} s of {a.repeats} "
           f"({min(times):.2f}–{max(times):.2f} s); Pareto k̂ {avg.pareto_k:.2f}, ESS {avg.ess:.0f}, "

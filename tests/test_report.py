@@ -420,19 +420,21 @@ def test_identifiability_section_says_why_no_next_throw_was_ranked(tiny, tmp_pat
     assert "<h3>Next throw</h3>" in sec.html and why in sec.html and "ln volume gain" not in sec.html
 
 def test_flagged_points_and_swapped_frames_are_listed(tiny, tmp_path):
-    """Robust runs (flagged.json): counts per flight, every outlier and swap with its time and probability;
-    runs without it have no such section."""
+    """Robust runs (flagged.json): counts and estimated π, w, π_s per flight (– for runs from before they were
+    estimated), every outlier and swap with its time and probability; runs without it have no such section."""
     from bayes_disc.report import content
     run = load_run(tiny["run"])
     assert content.flagged_section(ReportContext(run, tmp_path / "f0")) is None
     run.extras["flagged"] = {          # flagged.json: per flight
-        "a": {"outliers": [{"flight": "a", "t": 0.125, "marker": "1", "probability": 0.999}],
+        "a": {"mixture": {"outlier_fraction": 0.0123, "outlier_width_m": 0.0385, "swap_fraction": 0.0045},
+              "outliers": [{"flight": "a", "t": 0.125, "marker": "1", "probability": 0.999}],
               "swaps": [{"flight": "a", "t": 0.25, "markers": ["0", "2"], "probability": 0.99}]},
         "b": {"outliers": [{"flight": "b", "t": 0.5, "marker": "0", "probability": 0.97}], "swaps": []}}
     sec = build_sections(ReportContext(run, tmp_path / "f1"), [content.flagged_section])[0]
     assert sec.id == "flagged" and "0 ↔ 2" in sec.html and "0.1250" in sec.html and "0.970" in sec.html
-    assert re.search(r"<td>a</td><td[^>]*>1</td><td[^>]*>1</td>", sec.html), sec.html
-    assert re.search(r"<td>b</td><td[^>]*>1</td><td[^>]*>0</td>", sec.html), sec.html
+    assert re.search(r"<td>a</td><td[^>]*>1</td><td[^>]*>1</td><td[^>]*>1.23 %</td><td[^>]*>38.5</td>"
+                     r"<td[^>]*>0.45 %</td>", sec.html), sec.html
+    assert re.search(r"<td>b</td><td[^>]*>1</td><td[^>]*>0</td><td[^>]*>–</td>", sec.html), sec.html
     assert "Averaged over the judgement" not in sec.html
     moments = lambda m, sd: {"mean": m, "sd": sd, "q05": m - 1.645 * sd, "q50": m, "q95": m + 1.645 * sd}
     run.extras["judgement_average"] = {"draws": 4000, "failed": 0, "pareto_k": 0.21, "ess": 3500.0, "reliable": True,

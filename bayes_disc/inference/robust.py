@@ -2,16 +2,18 @@
 
 For every flight whose marker noise is ``robust`` (:class:`~bayes_disc.observation.models.noise.RobustNoise`)
 the points and frames of the recording as given are judged at the current least-squares optimum by the
-inlier/outlier and label-swap mixture of :mod:`bayes_disc.observation.models.outliers`, with each point's
+inlier/outlier and label-swap mixture of :mod:`bayes_disc.observation.models.outliers` (its π, w and π_s
+estimated for the flight by EM, :func:`~bayes_disc.observation.models.outliers.fit_mixture`), with each point's
 inlier scale σ_i = σ̂_f c_i: c_i the point's stated error relative to the flight's typical one (1 without
 per-point errors) and σ̂_f the robust scale √(median_i |r_i / c_i|² / 2.366) (2.366: the median of χ²₃),
 so that the gross errors being judged do not inflate it. Outlying points are removed and swapped labels
 restored (:func:`~bayes_disc.observation.models.outliers.clean_flight`), the fit is refined on the cleaned
-data, and this is repeated until the flags no longer change (at most :data:`MAX_ROUNDS` times).
+data, and this is repeated until the same points and frames are flagged twice running (at most
+:data:`MAX_ROUNDS` times).
 
 The sampler then explores the posterior on the cleaned data, conditional on that judgement.
 :func:`average_over_judgement` turns its draws into the posterior averaged over every judgement — the
-mixture itself as the likelihood of the recording as given, σ_f integrated out
+mixture itself, at each flight's estimated π, w, π_s, as the likelihood of the recording as given, σ_f integrated out
 (:func:`~bayes_disc.observation.models.outliers.mixture_log_likelihood`) — by importance sampling:
 
     log w(θ) = Σ_f [log p_mix(y_f | θ) − log p_Gauss(y_f^clean | θ)]     (robust flights f; priors cancel)
@@ -31,8 +33,8 @@ from scipy.stats import chi2
 
 from ..observation.models import MarkerPositions
 from ..observation.models.noise import RobustNoise, WhiteNoise
-from ..observation.models.outliers import (Classification, classify, clean_flight, log_marginal_over_scale,
-                                           mixture_log_likelihood)
+from ..observation.models.outliers import (PRIOR_SHAPE, Classification, MixtureShape, clean_flight, fit_mixture,
+                                           log_marginal_over_scale, mixture_log_likelihood)
 from .leastsq import LeastSquaresResult, refine_least_squares
 from .model import Problem
 
@@ -73,7 +75,8 @@ def point_scales(model: MarkerPositions) -> np.ndarray:
 
 
 def judge(problem: Problem, theta: np.ndarray, k: int, model: MarkerPositions, data) -> Classification:
-    """The mixture's judgement of flight k's recording ``data`` (as given) at θ (:func:`classify`)."""
+    """The mixture's judgement of flight k's recording ``data`` (as given) at θ, its π, w, π_s estimated
+    (:func:`~bayes_disc.observation.models.outliers.fit_mixture`)."""
     pred, ok = problem.predict(theta[None], k)
     if not ok[0]:
         raise RuntimeError(f"flight {data.name!r}: the fit no longer simulates; cannot judge outliers")
@@ -81,7 +84,7 @@ def judge(problem: Problem, theta: np.ndarray, k: int, model: MarkerPositions, d
     seen = data.observed
     r2 = np.sum((pred[0] - data.positions) ** 2, axis=-1)[seen] / c[seen] ** 2
     sigma = np.sqrt(np.median(r2) / _CHI2_3_MEDIAN)
-    return classify(data.name, data.times, data.marker_ids, pred[0], data.positions, sigma * c)
+    return fit_mixture(data.name, data.times, data.marker_ids, pred[0], data.positions, sigma * c)
 
 
 def suspected_gross_errors(problem: Problem, theta: np.ndarray) -> dict:
@@ -167,6 +170,11 @@ def robust_refit(problem: Problem, ls: LeastSquaresResult, max_nfev: int = 200, 
     flags : dict
         {flight: :meth:`Classification.records`} of the last judgement.
     """
+
+    def flagged(records: dict) -> dict:
+        """What a judgement flags: its outlying points and swapped frames (not π, w or the probabilities)."""
+        return {f: ([(o["t"], o["marker"]) for o in r["outliers"]], [(w["t"], w["markers"]) for w in r["swaps"]])
+                for f, r in records.items()}
     flights = robust_flights(problem)
     if not flights:
         return problem, ls, {}
@@ -175,7 +183,7 @@ def robust_refit(problem: Problem, ls: LeastSquaresResult, max_nfev: int = 200, 
         flags = {c.flight: judge(current, ls.theta, k, c, c.data).records() for k, c in flights}
         if progress is not None:
             progress(i + 1, sum(len(f["outliers"]) for f in flags.values()), sum(len(f["swaps"]) for f in flags.values()))
-        if flags == previous:
+        if previous is not None and flagged(flags) == flagged(previous):
             break
         current = problem.with_marker_data({c.flight: clean_flight(c.data, flags[c.flight]) for _, c in flights})
         ls = refine_least_squares(current, ls.theta, max_nfev=max_nfev)
@@ -231,7 +239,7 @@ def observation_whitening(model: MarkerPositions) -> np.ndarray | None:
 
 
 def judgement_log_weights(raw: Problem, clean: Problem, theta: np.ndarray, ss: np.ndarray,
-                          batch: int = 64) -> np.ndarray:
+                          shapes: dict | None = None, batch: int = 64) -> np.ndarray:
     """log w(θ) = Σ_f [log p_mix(y_f | θ) − log p_Gauss(y_f^clean | θ)] over the robust flights (module
     docstring) of draws sampled on the cleaned data.
 
@@ -245,6 +253,9 @@ def judgement_log_weights(raw: Problem, clean: Problem, theta: np.ndarray, ss: n
         Draws.
     ss : (B, n_groups) array
         Their effective sums of squares S̃_g in ``clean`` (the sampler's blobs).
+    shapes : dict, optional
+        {flight: MixtureShape}, each robust flight's π, w, π_s (``flagged.json`` → ``mixture``); the priors'
+        centre for a flight not in it.
     batch : int
         Draws simulated at once.
 
@@ -262,11 +273,13 @@ def judgement_log_weights(raw: Problem, clean: Problem, theta: np.ndarray, ss: n
         out -= clean_model.log_likelihood(ss[:, g])
         n_clean = int(clean_model.group_sizes[0])
         W, obs = observation_whitening(model), model.data.positions
+        sh = (shapes or {}).get(model.flight, PRIOR_SHAPE)
         for start in range(0, theta.shape[0], batch):
             rows = slice(start, start + batch)
             pred, ok = raw.predict(theta[rows], k)
             centre = 0.5 * np.log(ss[rows, g.start] / n_clean)
-            part = log_marginal_over_scale(lambda u, r: mixture_log_likelihood(pred[r], obs, W, u),
+            part = log_marginal_over_scale(lambda u, r: mixture_log_likelihood(
+                pred[r], obs, W, u, sh.outlier_fraction, sh.width, sh.swap_fraction),
                                            np.where(ok, centre, 0.0), model.n_coords)
             out[rows] += np.where(ok, part, -np.inf)
     return out
@@ -338,8 +351,14 @@ class JudgementAverage:
         return out
 
 
+def mixture_shapes(flags: dict) -> dict:
+    """{flight: MixtureShape} of a judgement's records (``flagged.json``). Runs from before π, w and π_s were
+    estimated wrote no ``mixture``: they were judged at the priors' centre, which is returned for them."""
+    return {f: MixtureShape.from_record(r["mixture"]) if "mixture" in r else PRIOR_SHAPE for f, r in flags.items()}
+
+
 def average_over_judgement(raw: Problem, clean: Problem, theta: np.ndarray, ss: np.ndarray, names: list[str],
-                           rng: np.random.Generator, draws: int = JUDGEMENT_DRAWS) -> JudgementAverage:
+                           rng: np.random.Generator, flags: dict, draws: int = JUDGEMENT_DRAWS) -> JudgementAverage:
     """The posterior averaged over the judgement of outliers and swaps, from the conditional posterior's draws.
 
     Parameters
@@ -354,6 +373,8 @@ def average_over_judgement(raw: Problem, clean: Problem, theta: np.ndarray, ss: 
         Parameters to summarise.
     rng : numpy.random.Generator
         Picks the draws reweighted.
+    flags : dict
+        The judgement (:func:`robust_refit`, ``flagged.json``): each robust flight's π, w, π_s.
     draws : int
         At most this many draws.
 
@@ -363,7 +384,7 @@ def average_over_judgement(raw: Problem, clean: Problem, theta: np.ndarray, ss: 
     """
     import arviz as az
     pick = np.sort(rng.choice(theta.shape[0], size=min(draws, theta.shape[0]), replace=False))
-    th, lw = theta[pick], judgement_log_weights(raw, clean, theta[pick], ss[pick])
+    th, lw = theta[pick], judgement_log_weights(raw, clean, theta[pick], ss[pick], mixture_shapes(flags))
     keep = np.isfinite(lw)                                      # a failed simulation: weight 0
     failed, th, lw = int(np.sum(~keep)), th[keep], lw[keep]
     smoothed, k = az.psislw(lw - np.max(lw))

@@ -251,9 +251,13 @@ def _save_least_squares(ls, out: Path) -> dict:
 
 
 def flag_lines(flags: dict) -> list[str]:
-    """One line per flagged point or frame: "a t=0.2083 s marker 1: outlier (p = 0.998)"."""
+    """Per flight its estimated mixture ("a: gross errors estimated at π = 0.12 % of points, ..."), then one
+    line per flagged point or frame: "a t=0.2083 s marker 1: outlier (p = 0.998)"."""
     out = []
-    for f in flags.values():
+    for name, f in flags.items():
+        m = f["mixture"]
+        out.append(f"{name}: gross errors estimated at π = {100 * m['outlier_fraction']:.2f} % of points, spread "
+                   f"w = {1e3 * m['outlier_width_m']:.1f} mm; swapped frames π_s = {100 * m['swap_fraction']:.2f} %")
         out += [f"{o['flight']} t={o['t']:.4f} s marker {o['marker']}: outlier (p = {o['probability']:.3f})"
                 for o in f["outliers"]]
         out += [f"{w['flight']} t={w['t']:.4f} s markers {w['markers'][0]} and {w['markers'][1]}: labels swapped "
@@ -291,7 +295,7 @@ def _average_over_judgement(raw, problem, chains, cfg: RunConfig, out: Path) -> 
     with stage("averaging over the judgement", "reweighting draws to the inlier/outlier/swap mixture likelihood") as st:
         avg = average_over_judgement(raw, problem, chains.chain.reshape(-1, problem.dim),
                                      chains.ss.reshape(-1, problem.n_groups), names,
-                                     np.random.default_rng(cfg.sampler.seed))
+                                     np.random.default_rng(cfg.sampler.seed), json.loads((out / FLAGGED).read_text()))
         (out / JUDGEMENT_AVERAGE).write_text(json.dumps(avg.to_dict(), indent=1))
         for line in avg.lines():
             logger.info(line)

@@ -30,7 +30,8 @@ Units (``noise.model`` in the run configuration):
   (outside it the likelihood is zero).
 * ``robust`` (:class:`RobustNoise`): the ``gaussian`` likelihood on the data cleaned of gross errors —
   points judged outliers are dropped and frames judged label-swapped restored by an inlier/outlier and
-  swap mixture (:mod:`.outliers`, repeated with the fit until the judgement is stable); the sampled
+  swap mixture (:mod:`.outliers`, its π, w and π_s estimated per flight by EM, repeated with the fit until
+  the judgement is stable); the sampled
   posterior is conditional on that judgement, and its draws are then reweighted to the posterior averaged
   over every judgement (:func:`.outliers.mixture_log_likelihood`,
   :func:`bayes_disc.inference.robust.average_over_judgement`).
@@ -214,13 +215,14 @@ class RobustNoise(WhiteNoise):
 
     id = "robust"
     title = "Gaussian marker noise after removing outliers and label swaps"
-    equations = ("judged: p(r_i) = (1 − π) N(0, σ_i² I₃) + π N(0, w² I₃), π = 0.01, w = 0.05 m; frames: labels "
-                 "as given (1 − π_s) or one pair exchanged (π_s = 0.01); fitted: the gaussian model on the "
-                 "cleaned data")
+    equations = ("judged: p(r_i) = (1 − π) N(0, σ_i² I₃) + π N(0, w² I₃); frames: labels as given (1 − π_s) or "
+                 "one pair exchanged (π_s); π, w, π_s estimated per flight by EM (priors centred on 0.01, 0.05 m, "
+                 "0.01); fitted: the gaussian model on the cleaned data")
 
     def describe(self) -> dict:
-        return super().describe() | {"outlier_fraction": OUTLIER_FRACTION, "outlier_width_m": OUTLIER_WIDTH_M,
-                                     "swap_fraction": SWAP_FRACTION}
+        return super().describe() | {"prior_outlier_fraction": OUTLIER_FRACTION, "prior_outlier_width_m": OUTLIER_WIDTH_M,
+                                     "prior_swap_fraction": SWAP_FRACTION,
+                                     "estimated": "per flight, flagged.json → mixture"}
 
 
 def _shape_points(eps: np.ndarray, points: PointScales | None, observed: np.ndarray | None) -> np.ndarray:
