@@ -239,7 +239,7 @@ def observation_whitening(model: MarkerPositions) -> np.ndarray | None:
 
 
 def judgement_log_weights(raw: Problem, clean: Problem, theta: np.ndarray, ss: np.ndarray,
-                          shapes: dict | None = None, batch: int = 64) -> np.ndarray:
+                          shapes: dict, batch: int = 64) -> np.ndarray:
     """log w(θ) = Σ_f [log p_mix(y_f | θ) − log p_Gauss(y_f^clean | θ)] over the robust flights (module
     docstring) of draws sampled on the cleaned data.
 
@@ -253,9 +253,8 @@ def judgement_log_weights(raw: Problem, clean: Problem, theta: np.ndarray, ss: n
         Draws.
     ss : (B, n_groups) array
         Their effective sums of squares S̃_g in ``clean`` (the sampler's blobs).
-    shapes : dict, optional
-        {flight: MixtureShape}, each robust flight's π, w, π_s (``flagged.json`` → ``mixture``); the priors'
-        centre for a flight not in it.
+    shapes : dict
+        {flight: MixtureShape}, each robust flight's π, w, π_s (:func:`mixture_shapes` of ``flagged.json``).
     batch : int
         Draws simulated at once.
 
@@ -273,7 +272,9 @@ def judgement_log_weights(raw: Problem, clean: Problem, theta: np.ndarray, ss: n
         out -= clean_model.log_likelihood(ss[:, g])
         n_clean = int(clean_model.group_sizes[0])
         W, obs = observation_whitening(model), model.data.positions
-        sh = (shapes or {}).get(model.flight, PRIOR_SHAPE)
+        if model.flight not in shapes:
+            raise KeyError(f"flight {model.flight!r}: no judgement (π, w, π_s) in the run's {FLAGGED}")
+        sh = shapes[model.flight]
         for start in range(0, theta.shape[0], batch):
             rows = slice(start, start + batch)
             pred, ok = raw.predict(theta[rows], k)
