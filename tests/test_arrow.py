@@ -112,6 +112,10 @@ def test_new_solver_matches_the_dense_optimum_and_covariance(small_problem):
     # the refined result (σ re-estimated) carries the structured covariance
     ls = refine_least_squares(p, new.x)
     np.testing.assert_allclose(ls.cov, jacobian_blocks(ls.theta, p, _rms(p, ls.theta)).information().inverse())
+    # its output: one marker RMS per flight, in mm, and every noise group with its unit
+    out = ls.to_dict()
+    assert out["rms_mm"] == {f.name: pytest.approx(1e3 * s) for f, s in zip(p.flights, ls.sigma)}
+    assert out["noise"] == {f"sigma_{f.name}": {"value": s, "unit": "m"} for f, s in zip(p.flights, ls.sigma)}
 
 
 def test_held_parameters_stay_put(small_problem):

@@ -9,7 +9,7 @@ from bayes_disc.diagnostics.missing_physics import (CANDIDATES, ModelFit, applic
                                                      model_fit, onset_unavailable, structured, term_signature)
 from bayes_disc.diagnostics.residuals import flight_residuals, localise, peak_window
 from bayes_disc.inference.inertial import InertialThrow, level_start, own_start, search_starts
-from bayes_disc.inference.leastsq import LeastSquaresResult, fit_least_squares
+from bayes_disc.inference.leastsq import LeastSquaresResult, fit_least_squares, noise_text
 from bayes_disc.inference.model import Problem
 from bayes_disc.observation.inertial_synth import LoggerSpec, synthetic_log
 from bayes_disc.observation.models.inertial import SERIES, InertialMeasurements
@@ -74,7 +74,8 @@ def true_theta(p: Problem, cy: float | None) -> np.ndarray:
 def fit_at(p: Problem, theta: np.ndarray, sigma: np.ndarray, ids=()) -> ModelFit:
     """A ModelFit at a given θ (no optimisation); the settled filter state is set from the first rows."""
     ls = LeastSquaresResult(theta=theta, sigma=sigma, cov=np.eye(p.dim), cost=0.0, condition_number=1.0,
-                            start_costs=[], nfev=0, message="", names=p.names, flight_names=[f.name for f in p.flights])
+                            start_costs=[], nfev=0, message="", names=p.names, flight_names=[f.name for f in p.flights],
+                            sigma_names=list(p.sigma_names), sigma_units=list(p.noise_units))
     return model_fit(p, ls, ids)
 
 
@@ -171,3 +172,21 @@ def test_inertial_problem_survives_pickling_into_worker_processes():
     r, ok = p.residuals(theta, 0)
     r2, ok2 = q.residuals(theta, 0)
     assert ok[0] and ok2[0] and np.array_equal(r, r2)
+
+
+def test_least_squares_output_reports_every_noise_group_in_its_own_unit():
+    """An inertial fit has four noise groups per throw (gyro and accelerometer, axial and transverse): its
+    least-squares output names each with its unit and lists no marker RMS. (Before, ``rms_mm`` paired the
+    flights with the first groups' σ, so a gyro σ in rad/s was shown as millimetres of the wrong throw.)"""
+    p = builder(throws(0.0, seed=3))(())
+    sigma = 0.01 * (1.0 + np.arange(p.n_groups))
+    ls = LeastSquaresResult(theta=p.start_vector(), sigma=sigma, cov=np.eye(p.dim), cost=0.0, condition_number=1.0,
+                            start_costs=[], nfev=0, message="", names=p.names, flight_names=[f.name for f in p.flights],
+                            sigma_names=list(p.sigma_names), sigma_units=list(p.noise_units))
+    out = ls.to_dict()
+    assert out["rms_mm"] == {}
+    assert list(out["noise"]) == p.sigma_names and len(p.sigma_names) == 4 * len(LAUNCHES)
+    for name, s in zip(p.sigma_names, sigma):
+        assert out["noise"][name] == {"value": s, "unit": "rad/s" if "gyro" in name else "m/s²"}
+    text = noise_text(out["noise"])
+    assert "mm" not in text and text.count("rad/s") == 2 * len(LAUNCHES) and text.count("m/s²") == 2 * len(LAUNCHES)

@@ -150,7 +150,8 @@ def test_reach_is_where_a_term_acts_beyond_the_launch(tmp_path):
     def fit_of(problem, theta):
         ls = LeastSquaresResult(theta=theta, sigma=np.full(problem.n_groups, NOISE_MM * 1e-3), cov=np.eye(theta.size),
                                 cost=0.0, condition_number=1.0, start_costs=[], nfev=0, message="",
-                                names=list(problem.names), flight_names=[])
+                                names=list(problem.names), flight_names=[], sigma_names=list(problem.sigma_names),
+                                sigma_units=list(problem.noise_units))
         return ModelFit((), problem, ls, np.ones(problem.n_groups))
     base_p = build_problem(cfg)
     base = fit_of(base_p, base_p.start_vector())

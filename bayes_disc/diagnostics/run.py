@@ -30,10 +30,9 @@ import numpy as np
 
 from ..inference.config import RunConfig
 from ..inference.data import build_problem
-from ..inference.leastsq import fit_least_squares, jacobian_blocks
+from ..inference.leastsq import fit_least_squares, jacobian_blocks, noise_text
 from ..inference.profile import profile_paths
 from ..inference.run import RESULT
-from ..observation.models import MarkerPositions
 from .identifiability import (ALPHA_PAIRS, coefficient_information, data_description, describe_throw,
                               design_skip_reason, flight_envelopes, marker_noise, rank_throws,
                               verdicts_from_covariance, weak_directions)
@@ -86,11 +85,8 @@ def run_identifiability(cfg: RunConfig, profiles: bool = False, design: bool = T
     ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
                            seed=cfg.sampler.seed)
     (out / "least_squares.json").write_text(json.dumps(ls.to_dict(), indent=1))   # the optimum (predict --from)
-    units = _noise_units(problem)
-    noise = {n: {"value": float(s), "unit": u} for n, s, u in zip(problem.sigma_names, ls.sigma, units)}
-    marker_rms = {n[len("sigma_"):]: v["value"] * 1e3 for n, v in noise.items() if v["unit"] == "m"}
-    logger.info(f"{cfg.name}: least squares cost {ls.cost:.1f}, residual RMS "
-                + ", ".join(f"{n} {v['value']:.3g} {v['unit']}" for n, v in noise.items()))
+    noise, marker_rms = ls.noise(), ls.marker_rms_mm()
+    logger.info(f"{cfg.name}: least squares cost {ls.cost:.1f}, residual RMS {noise_text(noise)}")
     data = data_description(problem)
     # envelope
     env = flight_envelopes(problem, ls.theta)
@@ -164,22 +160,6 @@ def run_identifiability(cfg: RunConfig, profiles: bool = False, design: bool = T
     logger.info(format_verdicts(result), extra=RESULT)
     logger.info(f"wrote {out / 'identifiability.json'} ({result['wall_time_s']:.0f} s)")
     return result
-
-
-def _noise_units(problem) -> list[str]:
-    """Unit of every noise group of the problem, in the order of ``problem.sigma_names``: m for marker
-    positions; for an inertial logger rad/s (gyro groups) and m/s² (accelerometer groups)."""
-    from ..observation.models.inertial import GROUPS, InertialMeasurements
-    out = []
-    for ch in problem.channels:
-        for c in ch:
-            if isinstance(c, MarkerPositions):
-                out += ["m"] * len(c.noise_names)
-            elif isinstance(c, InertialMeasurements):
-                out += ["rad/s" if g.startswith("gyro") else "m/s²" for g in GROUPS]
-            else:
-                raise ValueError(f"no unit known for the noise of observation model {c.id!r}")
-    return out
 
 
 def format_verdicts(result: dict) -> str:

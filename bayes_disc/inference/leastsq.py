@@ -31,15 +31,33 @@ class LeastSquaresResult:
     message: str
     names: list
     flight_names: list
+    sigma_names: list            # (n_groups,) public name of every noise group's σ (``sigma_<flight>`` for markers)
+    sigma_units: list            # (n_groups,) its unit ("m", "rad/s", "m/s²")
+
+    def noise(self) -> dict:
+        """{sigma name: {"value", "unit"}}: every noise group's residual RMS at the optimum."""
+        return {n: {"value": float(s), "unit": u} for n, s, u in zip(self.sigma_names, self.sigma, self.sigma_units)}
+
+    def marker_rms_mm(self) -> dict:
+        """{flight: RMS [mm]} of the marker noise groups (``sigma_<flight>``, unit m)."""
+        return {n[len("sigma_"):]: float(s * 1e3) for n, s, u in zip(self.sigma_names, self.sigma, self.sigma_units)
+                if u == "m"}
 
     def to_dict(self) -> dict:
         sd = np.sqrt(np.diag(self.cov))
         return {
             "cost": self.cost, "condition_number": self.condition_number, "nfev": self.nfev,
             "message": self.message, "start_costs": self.start_costs,
-            "rms_mm": {n: float(r * 1e3) for n, r in zip(self.flight_names, self.sigma)},
+            "rms_mm": self.marker_rms_mm(), "noise": self.noise(),
             "parameters": {n: {"value": float(v), "sd": float(s)} for n, v, s in zip(self.names, self.theta, sd)},
         }
+
+
+def noise_text(noise: dict) -> str:
+    """"a 1.52 mm, gyro_axial_b 0.0127 rad/s, …": a ``noise`` dict ({sigma name: {"value", "unit"}},
+    :meth:`LeastSquaresResult.noise`) as one line, marker groups in mm."""
+    return ", ".join(f"{n[len('sigma_'):]} {1e3 * v['value']:.2f} mm" if v["unit"] == "m"
+                     else f"{n[len('sigma_'):]} {v['value']:.3g} {v['unit']}" for n, v in noise.items())
 
 
 def _steps(problem: Problem, x: np.ndarray) -> np.ndarray:
@@ -389,7 +407,8 @@ def refine_least_squares(problem: Problem, x0: np.ndarray, max_nfev: int = 200, 
     cost = float(0.5 * np.sum(whitened_residuals(x, problem, sigma) ** 2))
     return LeastSquaresResult(theta=x, sigma=sigma, cov=cov, cost=cost, condition_number=J.information().condition_number(),
                               start_costs=[], nfev=int(nfev), message=res.message if res else "",
-                              names=problem.names, flight_names=[f.name for f in problem.flights])
+                              names=problem.names, flight_names=[f.name for f in problem.flights],
+                              sigma_names=list(problem.sigma_names), sigma_units=list(problem.noise_units))
 
 
 def _scaled_information(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -33,7 +33,7 @@ from .config import RunConfig
 from ..observation.models import MarkerPositions
 from .data import build_problem
 from .inertial import load_run_throws
-from .leastsq import fit_least_squares
+from .leastsq import fit_least_squares, noise_text
 from .results import build_inference_data, build_summary, format_table, prior_record, writing_posterior
 from .profile import profile_paths
 from .robust import (FLAGGED, JUDGEMENT_AVERAGE, average_over_judgement, gross_error_advice, robust_flights,
@@ -238,7 +238,7 @@ def _least_squares(problem, cfg: RunConfig, out: Path):
                                seed=cfg.sampler.seed, progress=report)
         ls_dict = _save_least_squares(ls, out)
         st.result = (f"cost {ls.cost:.1f}, condition number {ls.condition_number:.3g}, RMS "
-                     + ", ".join(f"{k} {v:.2f} mm" for k, v in ls_dict["rms_mm"].items()))
+                     + noise_text(ls_dict["noise"]))
     return ls, ls_dict
 
 

@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from ..inference.layout import IC_NAMES as IC_ORDER
+from ..inference.leastsq import noise_text
 from ..inference.versions import software_versions
 from ..physics import TERMS, Disc
 from ..physics.discrepancy import coefficient_curve
@@ -104,7 +105,7 @@ def appendix_section(ctx) -> Section:
     sampler = table(["sampler setting", "value"], _sampler_rows(settings, conv), "kv")
     ls = s.get("least_squares") or {}
     ls_rows = [("cost", fmt(ls.get("cost"))), ("condition number", fmt(ls.get("condition_number"), 3)),
-               ("RMS per flight [mm]", ", ".join(f"{k} {v:.2f}" for k, v in (ls.get("rms_mm") or {}).items()))]
+               ("residual RMS per noise group", _noise_rms(ls))]
     recorded = info.get("versions")
     if isinstance(recorded, dict) and recorded:
         software = ("<h3>Software (recorded by the run)</h3>"
@@ -119,6 +120,15 @@ def appendix_section(ctx) -> Section:
     return Section("appendix", "Appendix: run and software",
                    "How the result was produced: files, prior, sampler settings, the least-squares start and "
                    "the software versions.", html)
+
+
+
+def _noise_rms(ls: dict) -> str:
+    """The least-squares residual RMS of every noise group, with its unit (markers in mm); runs written
+    before the ``noise`` key only have ``rms_mm`` (marker flights)."""
+    if "noise" not in ls:
+        return ", ".join(f"{k} {v:.2f} mm" for k, v in (ls.get("rms_mm") or {}).items())
+    return noise_text(ls["noise"])
 
 
 def _ic_scales(truth_ic: np.ndarray) -> np.ndarray:
