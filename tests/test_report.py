@@ -559,3 +559,35 @@ def test_first_screen_in_a_browser_shows_table_and_verdicts(tiny, tmp_path):
     assert r.returncode == 0 and shot.is_file(), r.stderr[-2000:]
     px = np.asarray(Image.open(shot).convert("L"), float)
     assert px.std() > 10 and (px < 128).mean() > 0.01, "first screen looks blank"
+
+
+def test_diagnosis_figure_of_an_inertial_run_draws_the_logger_series():
+    """An inertial run's diagnosis has gyro and accelerometer series, no marker translations or attitude
+    angles: the figure draws the most structured logger series in its own unit (before, it fell back to the
+    marker series "roll", absent from the file, and the report stopped with a KeyError)."""
+    from bayes_disc.report import figures as F
+    from bayes_disc.report.content import SERIES_LABELS, diagnosis_series
+    rng = np.random.default_rng(0)
+    names = [f"{s}_{a}" for s in ("gyro", "acc") for a in "xyz"]
+    series = {"flights": np.array(["a", "b"])}
+    for c in range(2):
+        series[f"{c}_times"] = np.linspace(0.0, 1.0, 50)
+        for n in names:
+            series[f"{c}_times_{n}"] = series[f"{c}_times"]
+            series[f"{c}_se_{n}"] = np.full(50, 0.01)
+            series[f"{c}_before_{n}"] = rng.normal(0.0, 0.3, 50)
+            series[f"{c}_after_{n}"] = series[f"{c}_before_{n}"]
+    ratio = {"gyro_x": 5.0, "gyro_y": 40.0, "gyro_z": 2.0, "acc_x": 3.0, "acc_y": 1.0, "acc_z": 9.0}
+    data = {"localisation_before": {f: {n: {"noise_ratio": r} for n, r in ratio.items()} for f in ("a", "b")},
+            "effects": []}
+    chosen = diagnosis_series(series, data)
+    assert chosen == ["gyro_y"]
+    fig = F.diagnosis_figure(series, ["a", "b"], chosen, SERIES_LABELS)
+    assert fig.axes[0].get_ylabel() == "gyro y [rad/s]"
+    # a marker run keeps its choice: the most structured translation, then the most structured attitude angle
+    marker = {"flights": np.array(["a"]), "0_times": np.linspace(0.0, 1.0, 10),
+              **{f"0_{k}_{n}": np.zeros(10) for k in ("se", "before", "after")
+                 for n in ("along", "lateral", "normal", "roll", "pitch", "spin_phase")}}
+    loc = {"a": {"along": {"noise_ratio": 2.0}, "lateral": {"noise_ratio": 7.0}, "normal": {"noise_ratio": 1.0},
+                 "roll": {"noise_ratio": 1.5}, "pitch": {"noise_ratio": 3.0}, "spin_phase": {"noise_ratio": 1.0}}}
+    assert diagnosis_series(marker, {"localisation_before": loc, "effects": []}) == ["lateral", "pitch"]

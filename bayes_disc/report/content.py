@@ -442,9 +442,16 @@ def identifiability_section(ctx) -> Section:
     return Section("identifiability", "Identifiability", guide, "".join(parts), figs)
 
 
-SERIES_LABELS = {"along": "along-track [mm]", "lateral": "lateral [mm]", "normal": "vertical [mm]",
-                 "d1": "d1 [mm]", "d2": "d2 [mm]", "d3": "d3 [mm]", "roll": "roll [mrad]", "pitch": "pitch [mrad]",
-                 "spin_phase": "spin phase [mrad]"}
+#: the residual series the diagnosis figure draws: {name: (axis label, factor from the series' unit to the
+#: label's)}; markers in m and rad, an inertial logger's in rad/s and m/s²
+SERIES_LABELS = {"along": ("along-track [mm]", 1e3), "lateral": ("lateral [mm]", 1e3),
+                 "normal": ("vertical [mm]", 1e3), "d1": ("d1 [mm]", 1e3), "d2": ("d2 [mm]", 1e3),
+                 "d3": ("d3 [mm]", 1e3), "roll": ("roll [mrad]", 1e3), "pitch": ("pitch [mrad]", 1e3),
+                 "spin_phase": ("spin phase [mrad]", 1e3),
+                 **{f"gyro_{a}": (f"gyro {a} [rad/s]", 1.0) for a in "xyz"},
+                 **{f"acc_{a}": (f"accelerometer {a} [m/s²]", 1.0) for a in "xyz"}}
+#: attitude series (one of them is drawn beside the most structured other series)
+ROTATION_SERIES = ("roll", "pitch", "spin_phase")
 
 
 def _estimate_text(est: dict) -> str:
@@ -460,6 +467,37 @@ def _min_p(per: dict) -> str:
     return f"{min(p):.1e}" if p else "–"
 
 
+def diagnosis_series(series: dict, data: dict) -> list[str]:
+    """The residual series the diagnosis figure draws (at most three): the most structured series of the
+    base fit that is not an attitude angle, the most structured attitude angle, then the accepted terms'
+    effect series; only series with a label (:data:`SERIES_LABELS`) recorded for every flight.
+
+    Parameters
+    ----------
+    series : dict
+        The arrays of ``diagnosis_residuals.npz`` (``flights``, ``<c>_se_<name>``, …).
+    data : dict
+        ``diagnosis.json``.
+
+    Returns
+    -------
+    list of str
+    """
+    n = len(series["flights"])
+
+    def drawable(name) -> bool:
+        return name in SERIES_LABELS and all(f"{c}_se_{name}" in series for c in range(n))
+    ratio = {}
+    for per in (data.get("localisation_before") or {}).values():
+        for name, d in per.items():
+            ratio.setdefault(name, []).append(d.get("noise_ratio") or 0.0)
+    by_structure = [m for m in sorted(ratio, key=lambda m: -float(np.median(ratio[m]))) if drawable(m)]
+    names = [next((m for m in by_structure if m not in ROTATION_SERIES), None),
+             next((m for m in by_structure if m in ROTATION_SERIES), None)]
+    names += [(e.get("fingerprint") or {}).get("effect_series") for e in data.get("effects") or []]
+    return list(dict.fromkeys(m for m in names if m is not None and drawable(m)))[:3]
+
+
 def _diagnosis_figure(ctx, data: dict):
     path = Path(ctx.run.run_dir) / "diagnosis_residuals.npz"
     if not path.is_file():
@@ -467,18 +505,9 @@ def _diagnosis_figure(ctx, data: dict):
     with np.load(path) as z:
         series = {k: z[k] for k in z.files}
     flights = [str(f) for f in series["flights"]]
-    loc = data.get("localisation_before") or {}
-    ratio = {}
-    for per in loc.values():
-        for name, d in per.items():
-            ratio.setdefault(name, []).append(d.get("noise_ratio") or 0.0)
-    rotations = ("roll", "pitch", "spin_phase")
-    by_structure = sorted(ratio, key=lambda n: -float(np.median(ratio[n])))
-    names = [next((n for n in by_structure if n not in rotations), "lateral"),
-             next((n for n in by_structure if n in rotations), "roll")]
-    for e in data.get("effects") or []:
-        names.append((e.get("fingerprint") or {}).get("effect_series"))
-    names = list(dict.fromkeys(n for n in names if n in SERIES_LABELS))[:3]
+    names = diagnosis_series(series, data)
+    if not names:
+        return None
     fig = F.diagnosis_figure(series, flights, names, SERIES_LABELS)
     return _figure(ctx, fig, "diagnosis_residuals",
                    "Residual series before (grey) and after (blue) the diagnosis' refit, per flight: the most "

@@ -412,18 +412,19 @@ def correlation_figure(corr: np.ndarray, names) -> Figure:
 
 
 def diagnosis_figure(series: dict, flights: list[str], names: list[str], labels: dict) -> Figure:
-    """Residual series before (grey) and after (blue) the accepted terms, one row per series in ``names``
-    (translations in mm, attitude angles in mrad), one column per flight; the band is ±2 noise standard
-    errors. ``series``: the arrays of ``diagnosis_residuals.npz``."""
+    """Residual series before (grey) and after (blue) the accepted terms, one row per series in ``names``,
+    one column per flight; the band is ±2 noise standard errors. ``series``: the arrays of
+    ``diagnosis_residuals.npz`` (a series' own times ``<c>_times_<name>`` where it has them, else the
+    flight's ``<c>_times``); ``labels``: {name: (axis label, factor from the series' unit to the label's)}."""
     n = len(flights)
     height = 2.3 * len(names) + 1.0
     fig = new_figure(max(6.0, 3.2 * n), height)
     axes = fig.subplots(len(names), n, sharey="row", squeeze=False)
     for c, flight in enumerate(flights):
-        t = series[f"{c}_times"]
         for r, name in enumerate(names):
             ax = axes[r, c]
-            scale = 1e3
+            t = series.get(f"{c}_times_{name}", series[f"{c}_times"])
+            label, scale = labels[name]
             se = series[f"{c}_se_{name}"] * scale
             ax.fill_between(t, -2 * se, 2 * se, color="tab:blue", alpha=0.15, lw=0, label="±2 noise s.e." if r == c == 0 else None)
             ax.plot(t, series[f"{c}_before_{name}"] * scale, ".", ms=3, color="0.45", label="before" if r == c == 0 else None)
@@ -431,7 +432,7 @@ def diagnosis_figure(series: dict, flights: list[str], names: list[str], labels:
             ax.axhline(0, color="k", lw=0.5)
             ax.tick_params(labelsize=7)
             if c == 0:
-                ax.set_ylabel(labels[name], fontsize=8)
+                ax.set_ylabel(label, fontsize=8)
             if r == len(names) - 1:
                 ax.set_xlabel("t [s]", fontsize=9)
         axes[0, c].set_title(flight, fontsize=10)
