@@ -591,3 +591,14 @@ def test_diagnosis_figure_of_an_inertial_run_draws_the_logger_series():
     loc = {"a": {"along": {"noise_ratio": 2.0}, "lateral": {"noise_ratio": 7.0}, "normal": {"noise_ratio": 1.0},
                  "roll": {"noise_ratio": 1.5}, "pitch": {"noise_ratio": 3.0}, "spin_phase": {"noise_ratio": 1.0}}}
     assert diagnosis_series(marker, {"localisation_before": loc, "effects": []}) == ["lateral", "pitch"]
+
+
+def test_noise_rms_formats_old_and_new_runs_alike():
+    """The appendix's residual RMS: a run's ``noise`` groups in their units, and a run written before that key
+    (only ``rms_mm``, marker flights) through the same formatter (``leastsq.noise_text``)."""
+    from bayes_disc.report.content import _noise_rms
+    new = {"noise": {"sigma_bsfl5": {"value": 0.00152, "unit": "m"},
+                     "sigma_gyro_axial": {"value": 0.0127, "unit": "rad/s"}}}
+    assert _noise_rms(new) == "bsfl5 1.52 mm, gyro_axial 0.0127 rad/s"
+    assert _noise_rms({"rms_mm": {"bsfl5": 1.52, "fffl10": 0.98}}) == "bsfl5 1.52 mm, fffl10 0.98 mm"
+    assert _noise_rms({}) == ""

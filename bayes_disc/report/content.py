@@ -126,9 +126,9 @@ def appendix_section(ctx) -> Section:
 def _noise_rms(ls: dict) -> str:
     """The least-squares residual RMS of every noise group, with its unit (markers in mm); runs written
     before the ``noise`` key only have ``rms_mm`` (marker flights)."""
-    if "noise" not in ls:
-        return ", ".join(f"{k} {v:.2f} mm" for k, v in (ls.get("rms_mm") or {}).items())
-    return noise_text(ls["noise"])
+    noise = ls["noise"] if "noise" in ls else {
+        f"sigma_{k}": {"value": 1e-3 * v, "unit": "m"} for k, v in (ls.get("rms_mm") or {}).items()}
+    return noise_text(noise)
 
 
 def _ic_scales(truth_ic: np.ndarray) -> np.ndarray:
