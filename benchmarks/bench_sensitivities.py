@@ -290,7 +290,8 @@ def make_integrator(rk_sens_step, marker_dq):
                             for j in range(4):
                                 S[(6 + j) * NPAD + col] = (S[(6 + j) * NPAD + col] - y[6 + j] * dot) / nq
                 tcur = times[it]
-            # markers r + R(q) mb and their sensitivities
+            # markers r + R(q) mb and their sensitivities; R(q) is the kernel's output formula
+            # (integrator.integrate) on purpose: the markers are compared with the kernel's to 1e-14 m
             qw, qx, qy, qz = y[6], y[7], y[8], y[9]
             r00 = 1 - 2 * (qy * qy + qz * qz)
             r01 = 2 * (qx * qy - qw * qz)
