@@ -8,6 +8,8 @@ import numpy as np
 from ..inference.layout import IC_NAMES as IC_ORDER
 from ..inference.leastsq import noise_text
 from ..inference.versions import software_versions
+from ..observation.models.inertial import SERIES as INERTIAL_SERIES, SERIES_UNITS as INERTIAL_UNITS
+from ..observation.models.markers import ROTATIONS
 from ..physics import TERMS, Disc
 from ..physics.discrepancy import coefficient_curve
 from ..physics.nature import NATURE
@@ -448,10 +450,8 @@ SERIES_LABELS = {"along": ("along-track [mm]", 1e3), "lateral": ("lateral [mm]",
                  "normal": ("vertical [mm]", 1e3), "d1": ("d1 [mm]", 1e3), "d2": ("d2 [mm]", 1e3),
                  "d3": ("d3 [mm]", 1e3), "roll": ("roll [mrad]", 1e3), "pitch": ("pitch [mrad]", 1e3),
                  "spin_phase": ("spin phase [mrad]", 1e3),
-                 **{f"gyro_{a}": (f"gyro {a} [rad/s]", 1.0) for a in "xyz"},
-                 **{f"acc_{a}": (f"accelerometer {a} [m/s²]", 1.0) for a in "xyz"}}
-#: attitude series (one of them is drawn beside the most structured other series)
-ROTATION_SERIES = ("roll", "pitch", "spin_phase")
+                 **{s: (f"{'gyro' if s.startswith('gyro') else 'accelerometer'} {s[-1]} [{u}]", 1.0)
+                    for s, u in zip(INERTIAL_SERIES, INERTIAL_UNITS)}}
 
 
 def _estimate_text(est: dict) -> str:
@@ -492,8 +492,8 @@ def diagnosis_series(series: dict, data: dict) -> list[str]:
         for name, d in per.items():
             ratio.setdefault(name, []).append(d.get("noise_ratio") or 0.0)
     by_structure = [m for m in sorted(ratio, key=lambda m: -float(np.median(ratio[m]))) if drawable(m)]
-    names = [next((m for m in by_structure if m not in ROTATION_SERIES), None),
-             next((m for m in by_structure if m in ROTATION_SERIES), None)]
+    names = [next((m for m in by_structure if m not in ROTATIONS), None),
+             next((m for m in by_structure if m in ROTATIONS), None)]
     names += [(e.get("fingerprint") or {}).get("effect_series") for e in data.get("effects") or []]
     return list(dict.fromkeys(m for m in names if m is not None and drawable(m)))[:3]
 
