@@ -55,15 +55,14 @@ if str(REPO) not in sys.path:
 import numba as nb  # noqa: E402
 import sympy as sp  # noqa: E402
 
-from bayes_disc.physics import Disc, Environment, SimulatorSettings, simulate  # noqa: E402
+from bayes_disc.physics import COEFFICIENT_NAMES, Disc, Environment, SimulatorSettings, simulate  # noqa: E402
 from bayes_disc.physics import rhs as rhs_module  # noqa: E402
 from bayes_disc.physics.arctan import alpha_and_inverse  # noqa: E402
 from bayes_disc.physics.integrator import SEGMENT_MAX  # noqa: E402
 from bayes_disc.physics.tableaux import DEFAULT_STEP_FACTOR, get_tableau  # noqa: E402
 
 NY, NC = 13, 10
-COLUMNS = ("x", "y", "z", "vx", "vy", "vz", "qw", "qx", "qy", "qz", "wx", "wy", "wz", "CL0", "CLa", "CD0", "CDa",
-           "CM0", "CMa", "CMq", "CRr", "CRp", "CNr")
+COLUMNS = ("x", "y", "z", "vx", "vy", "vz", "qw", "qx", "qy", "qz", "wx", "wy", "wz") + tuple(COEFFICIENT_NAMES)
 NCOL = NY + NC
 #: row length of the tangent arrays: the 23 columns padded to a multiple of 4 (an AVX2 register), so that
 #: the column loops have no scalar remainder (the padding column stays zero)
