@@ -27,8 +27,9 @@ sys.path.insert(0, str(ROOT))
 
 from bayes_disc.inference.config import load_config  # noqa: E402
 from bayes_disc.inference.data import build_problem  # noqa: E402
-from bayes_disc.inference.moves import FlightBlockMove, IndependenceJump, SharedShift, block_factors  # noqa: E402
-from bayes_disc.inference.proposals import CompositeProposal, Proposal  # noqa: E402
+from bayes_disc.inference.moves import (FlightBlockMove, IndependenceJump, RidgeCarry, RidgeFlightRefresh,  # noqa: E402
+                                        SharedShift, block_factors)
+from bayes_disc.inference.proposals import CompositeProposal, Proposal, RidgeProposal  # noqa: E402
 
 
 class _Model:
@@ -62,6 +63,11 @@ def main(argv=None) -> int:
     moves = {"independence jump": IndependenceJump(independence),
              "flight-block Gibbs sweep": FlightBlockMove(problem, conditional),
              "shared shift": emcee.moves.MHMove(SharedShift(shared, regression))}
+    ridges = [j for j, q in enumerate(independence.parts) if isinstance(q, RidgeProposal)]
+    if ridges:
+        parts, weights = tuple(independence.parts[j] for j in ridges), independence.log_weights[ridges]
+        moves["ridge carry"] = emcee.moves.MHMove(RidgeCarry(parts, weights, fresh=s - 1))
+        moves["ridge flight refresh"] = RidgeFlightRefresh(problem, parts, weights)
     print(f"{args.case}: {problem.n_flights} flights, {problem.dim} parameters ({s} shared), {x0.shape[0]} walkers")
     for name, move in moves.items():
         acc, js, jf, t0 = [], [], [], time.perf_counter()
@@ -72,7 +78,7 @@ def main(argv=None) -> int:
             acc.append(accepted.mean())
             js.append(np.mean(np.sum(d[:, :s] ** 2, axis=1)))
             jf.append(np.mean(np.sum(d[:, s:] ** 2, axis=1)))
-        print(f"  {name:26s} accepted {np.mean(acc):.3f} (Gibbs: any flight)  mean squared jump: shared "
+        print(f"  {name:26s} accepted {np.mean(acc):.3f} (sweeps: any flight)  mean squared jump: shared "
               f"{np.mean(js):.3f} of {s} sd², flights {np.mean(jf):.2f} of {problem.dim - s} sd²  "
               f"({(time.perf_counter() - t0) / args.repeats:.2f} s per application)")
     coverage(problem, independence, chains, x0, blobs[:, 0])

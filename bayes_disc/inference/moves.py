@@ -7,7 +7,7 @@ diagonal and every flight's likelihood reads only θ_s, θ_k and its own noise g
 
     p(θ_k | θ_s, θ_−k, y) ∝ p(y_k | θ_s, θ_k) p(θ_k).
 
-Two exact Metropolis–Hastings moves follow (each leaves the posterior invariant):
+Three exact Metropolis–Hastings moves follow (each leaves the posterior invariant):
 
 * :class:`FlightBlockMove` — Metropolis-within-Gibbs over the flights: for every flight k (all flights in
   one sweep: given θ_s the updates are independent, so updating them together equals updating them in
@@ -15,17 +15,27 @@ Two exact Metropolis–Hastings moves follow (each leaves the posterior invarian
   of θ_k given the rest under the reference Gaussian (the inverse of the precision's own block), accepted
   with probability min(1, p(y_k | θ_s, θ_k′) p(θ_k′) / p(y_k | θ_s, θ_k) p(θ_k)): one simulation of
   flight k per walker, the other flights untouched.
+* :class:`RidgeFlightRefresh` — the same sweep with every flight's block drawn afresh from a ridge
+  proposal's conditional given θ_s (an independence proposal per flight, whose Hastings factor reads that
+  flight's block only), so a flight jumps across its posterior instead of stepping through it.
 * :class:`SharedShift` — a random walk of the shared parameters that carries every flight along its
   regression on them: δ ~ N(0, (2.38²/s) Σ_ss), θ_s′ = θ_s + δ, θ_k′ = θ_k + Σ_ks Σ_ss⁻¹ δ (Σ the reference
   covariance). The proposal is a translation by M δ with M fixed and δ symmetric, so its Hastings factor
   is 1; it moves in the s-dimensional subspace where the coefficients' posterior correlations with the
   flights' initial conditions are followed, so its step size does not shrink with the number of flights.
+  The regression is linear; along the curved CM0–CMq valley it is not, and on seed 18's 24-flight walkers
+  (``benchmarks/bench_scale.py``) these steps were accepted 0.5 % of the time.
 
 And :class:`IndependenceJump` — the independence Metropolis–Hastings jump x′ ~ q, accepted with probability
 min(1, p(x′ | y) q(x) / p(x | y) q(x′)), that keeps ln q of every walker's position after the jump, so a
 walker that has not moved since (rejected, or untouched by the moves in between) costs no new density
-evaluation: with the ridge proposals' per-point algebra, ln q costs about as much as the log-posterior at
-24 flights (298 parameters: 0.097 s against 0.16 s for 128 walkers).
+evaluation: with the ridge proposals' per-point algebra, ln q cost about as much as the log-posterior at
+24 flights (298 parameters: 0.097 s against 0.16 s for 128 walkers) until the factors became block-sparse
+(stop 38: 56 → 12 ms for 128 walkers on seed 18's 24 flights, :mod:`._ridge_kernels`).
+
+And :class:`RidgeCarry` — the jump along a ridge proposal that draws the coefficients afresh and carries
+every flight's whitened place across the valley, so that its acceptance does not fall as flights are
+added (its docstring).
 """
 from __future__ import annotations
 
@@ -74,8 +84,57 @@ def block_factors(problem: Problem, cov: np.ndarray) -> tuple[list[np.ndarray], 
     return conditional, scaled_cholesky(Sss), regression
 
 
-class FlightBlockMove(Move):
-    """Metropolis-within-Gibbs sweep over every flight's own block (module docstring).
+class _FlightSweep(Move):
+    """A Metropolis-within-Gibbs sweep over every flight's own block θ_k, given the shared parameters θ_s
+    (unchanged by the sweep): for every flight k a proposal θ_k′ from :meth:`block_proposal` with its log
+    Hastings factor ln q(θ_k | θ_k′) − ln q(θ_k′ | θ_k), accepted with probability
+
+        min(1, p(y_k | θ_s, θ_k′) p(θ_k′) q(θ_k | θ_k′) / p(y_k | θ_s, θ_k) p(θ_k) q(θ_k′ | θ_k)):
+
+    one simulation of flight k per walker, the other flights untouched. Subclasses say how θ_k′ is
+    proposed."""
+
+    problem: Problem
+
+    def prepare(self, coords: np.ndarray, random) -> None:
+        """Called once per sweep with the walkers (nw, dim) before any flight is proposed."""
+
+    def block_proposal(self, k: int, coords: np.ndarray, random) -> tuple[np.ndarray, np.ndarray]:
+        """Flight k's proposed block (nw, p_k) for walkers coords (nw, dim), and the log Hastings factor (nw,)."""
+        raise NotImplementedError
+
+    def propose(self, model, state):
+        p = self.problem
+        coords = state.coords.copy()
+        nw = coords.shape[0]
+        blobs = np.asarray(state.blobs, float).reshape(nw, p.n_groups).copy()
+        accepted = np.zeros(nw, bool)
+        self.prepare(coords, model.random)
+        for k in range(p.n_flights):
+            sl, groups = p.layout.flight_slice(k), p.flight_groups(k)
+            block, log_factor = self.block_proposal(k, coords, model.random)
+            trial = coords.copy()
+            trial[:, sl] = block
+            ss = p.flight_sum_squares(trial, k)
+            zn = (trial[:, sl] - p.prior_mean[sl]) / p.prior_sd[sl]
+            zo = (coords[:, sl] - p.prior_mean[sl]) / p.prior_sd[sl]
+            diff = (p.flight_log_likelihood(ss, k) - p.flight_log_likelihood(blobs[:, groups], k)
+                    - 0.5 * np.sum(zn * zn - zo * zo, axis=1) + log_factor)
+            diff = np.where(np.isfinite(diff), diff, -np.inf)
+            take = np.log(model.random.rand(nw)) < diff
+            coords[take, sl] = trial[take, sl]
+            blobs[np.ix_(take, groups)] = ss[take]
+            accepted |= take
+        # the log-posterior from its parts (no simulation): exactly what a full evaluation would give
+        log_prob = p.log_prior(coords) + p.log_likelihood_from_ss(blobs)
+        log_prob = np.where(np.isfinite(log_prob), log_prob, -np.inf)
+        shaped = blobs.reshape(np.shape(state.blobs))
+        return State(coords, log_prob=log_prob, blobs=shaped, random_state=state.random_state), accepted
+
+
+class FlightBlockMove(_FlightSweep):
+    """Metropolis-within-Gibbs sweep over every flight's own block (module docstring): Gaussian random-walk
+    proposals θ_k′ = θ_k + (2.38/√p_k) L_k z, Hastings factor 1.
 
     Parameters
     ----------
@@ -92,33 +151,55 @@ class FlightBlockMove(Move):
         self.conditional = conditional
         self.scale = scale
 
-    def propose(self, model, state):
-        p = self.problem
-        coords = state.coords.copy()
-        nw = coords.shape[0]
-        blobs = np.asarray(state.blobs, float).reshape(nw, p.n_groups).copy()
-        accepted = np.zeros(nw, bool)
-        for k, L in enumerate(self.conditional):
-            sl, groups = p.layout.flight_slice(k), p.flight_groups(k)
-            step = (self.scale * 2.38 / np.sqrt(L.shape[0])) * model.random.randn(nw, L.shape[0]) @ L.T
-            trial = coords.copy()
-            trial[:, sl] += step
-            ss = p.flight_sum_squares(trial, k)
-            zn = (trial[:, sl] - p.prior_mean[sl]) / p.prior_sd[sl]
-            zo = (coords[:, sl] - p.prior_mean[sl]) / p.prior_sd[sl]
-            diff = (p.flight_log_likelihood(ss, k) - p.flight_log_likelihood(blobs[:, groups], k)
-                    - 0.5 * np.sum(zn * zn - zo * zo, axis=1))
-            diff = np.where(np.isfinite(diff), diff, -np.inf)
-            take = np.log(model.random.rand(nw)) < diff
-            coords[take, sl] = trial[take, sl]
-            blobs[np.ix_(take, groups)] = ss[take]
-            accepted |= take
-        # the log-posterior from its parts (no simulation): exactly what a full evaluation would give
-        log_prob = p.log_prior(coords) + p.log_likelihood_from_ss(blobs)
-        log_prob = np.where(np.isfinite(log_prob), log_prob, -np.inf)
-        shaped = blobs.reshape(np.shape(state.blobs))
-        return State(coords, log_prob=log_prob, blobs=shaped, random_state=state.random_state), accepted
+    def block_proposal(self, k, coords, random):
+        L = self.conditional[k]
+        step = (self.scale * 2.38 / np.sqrt(L.shape[0])) * random.randn(coords.shape[0], L.shape[0]) @ L.T
+        return coords[:, self.problem.layout.flight_slice(k)] + step, np.zeros(coords.shape[0])
 
+
+
+class RidgeFlightRefresh(_FlightSweep):
+    """A sweep over the flights that draws every flight's block afresh from a ridge proposal's conditional
+    given the shared parameters (an independence proposal per flight, given θ_s):
+
+        θ_k′ ~ N(m_k(v, θ_s), L_kk(v) L_kk(v)ᵀ)    (:meth:`.proposals.RidgeProposal.block_conditionals`),
+
+    v = θ_i the ridge's coefficient. Its Hastings factor is ½|ξ|² − ½|L_kk⁻¹ (θ_k − m_k)|², ξ the draw's
+    standard normal: the proposal depends on θ_s only, which the sweep does not change. Where the random
+    walk of :class:`FlightBlockMove` moves a flight by a fraction of its conditional sd per step, this
+    jumps across it, following the valley through the ridge's interpolated conditional mean. One ridge per
+    walker, drawn with the ridges' weights.
+
+    Parameters
+    ----------
+    problem : Problem
+    ridges : tuple of RidgeProposal
+    log_weights : (R,) array
+    """
+
+    def __init__(self, problem: Problem, ridges, log_weights):
+        self.problem = problem
+        self.ridges = tuple(ridges)
+        self.log_weights = np.asarray(log_weights, float)
+        self._conditionals: list | None = None
+
+    def prepare(self, coords, random):
+        p, nw = self.problem, coords.shape[0]
+        w = np.exp(self.log_weights - np.max(self.log_weights))
+        pick = random.choice(len(self.ridges), size=nw, p=w / w.sum())
+        blocks = [p.layout.flight_slice(k) for k in range(p.n_flights)]
+        out = [(np.empty((nw, b.stop - b.start)), np.empty((nw, b.stop - b.start, b.stop - b.start))) for b in blocks]
+        for j in np.unique(pick):
+            at = pick == j
+            for (mean, chol), (m, L) in zip(out, self.ridges[j].block_conditionals(coords[at], p.ic_start - 1, blocks)):
+                mean[at], chol[at] = m, L
+        self._conditionals = out
+
+    def block_proposal(self, k, coords, random):
+        mean, L = self._conditionals[k]
+        xi = random.randn(*mean.shape)
+        old = np.linalg.solve(L, (coords[:, self.problem.layout.flight_slice(k)] - mean)[..., None])[..., 0]
+        return mean + np.einsum("npq,nq->np", L, xi), 0.5 * np.sum(xi * xi, axis=1) - 0.5 * np.sum(old * old, axis=1)
 
 @dataclass(frozen=True)
 class SharedShift:
@@ -186,3 +267,66 @@ class IndependenceJump(MHMove):
         state, accepted = super().propose(model, state)
         self._memo = (state.coords.copy(), np.where(accepted, self._log_q[1], self._log_q[0]))
         return state, accepted
+
+
+@dataclass(frozen=True)
+class RidgeCarry:
+    """Jumps along the ridge proposals' paths that carry every flight's place across the valley: an emcee
+    ``MHMove`` proposal function.
+
+    A ridge proposal (:class:`.proposals.RidgeProposal`) writes every point as (v, z): v = θ_i, the profiled
+    coefficient, and z = L(v)⁻¹ (θ_−i − m(v)) the point's whitened place across the valley at v. θ_−i lists
+    the other shared parameters first, then the flights, and L(v) is lower-triangular, so z = (z_s, z_f):
+    z_s whitens the shared parameters given v, z_f every flight's block given v and them. The move draws v′
+    from the ridge's 1-D density g and z_s′ ~ N(0, I) afresh and keeps the walker's z_f:
+
+        v′ ~ g,    z_s′ ~ N(0, I_s),    θ′_−i = m(v′) + L(v′) (z_s′, z_f).
+
+    In the coordinates (v, z) this proposal is reversible with respect to g(v) N(z; 0, I); the change of
+    coordinates adds the Jacobian |L(v′)| / |L(v)|, so the move is exact with acceptance probability
+
+        min(1, p(θ′ | y) q(θ) / p(θ | y) q(θ′)),
+
+    q the ridge's density: the independence jump's ratio, in which the terms ½|z_f|² of q at θ and θ′
+    are equal and cancel. That is the point. An independence jump draws every flight's z_f afresh and pays
+    the misfit between the posterior's conditional and the ridge's in all of the flights' dimensions at
+    every jump, so its acceptance falls as flights are added (seed 18 of ``benchmarks/bench_scale.py``, kept
+    walkers: 13 %, 14 %, 6 % at 4, 12, 24 flights); a carried z_f pays only how that misfit changes
+    between (v, z_s) and (v′, z_s′) (the same walkers: 27 %, 36 %, 35 %). The flights' z_f are moved by
+    the other moves (flight-block sweeps, DE and independence jumps).
+
+    One ridge per walker, drawn with the ridges' weights in the independence proposal (fixed during a
+    round: a mixture of exact moves is exact).
+
+    Attributes
+    ----------
+    ridges : tuple of RidgeProposal
+    log_weights : (R,) array
+        Log weights of the ridges (normalised here).
+    fresh : int
+        s, the number of leading whitened coordinates drawn afresh: the shared parameters other than θ_i
+        (``Problem.ic_start − 1``); 0 carries all of z.
+    """
+
+    ridges: tuple
+    log_weights: np.ndarray
+    fresh: int = 0
+
+    def __call__(self, coords, random):
+        w = np.exp(self.log_weights - np.max(self.log_weights))
+        pick = random.choice(len(self.ridges), size=coords.shape[0], p=w / w.sum())
+        new = coords.copy()
+        factor = np.zeros(coords.shape[0])
+        for j in np.unique(pick):
+            at = pick == j
+            ridge = self.ridges[j]
+            n = int(at.sum())
+            z, log_det = ridge.whiten(coords[at])
+            v_new = ridge.draw_g(n, random)
+            z_new = z.copy()
+            z_new[:, :self.fresh] = random.randn(n, self.fresh)
+            new[at], log_det_new = ridge.place(v_new, z_new)
+            # ln q(θ) − ln q(θ′) of the ridge's density (its normalising constant cancels)
+            factor[at] = ((ridge.log_g_density(coords[at, ridge.index]) - log_det - 0.5 * np.sum(z * z, axis=1))
+                          - (ridge.log_g_density(v_new) - log_det_new - 0.5 * np.sum(z_new * z_new, axis=1)))
+        return new, factor

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 from scipy.linalg import solve_triangular
 
-from ._ridge_kernels import interpolated_product, interpolated_solve
+from ._ridge_kernels import interpolated_product, interpolated_whiten
 from .model import Problem
 
 #: proposal sd / posterior sd after a warm-up re-fit (slightly wider: safe tails)
@@ -193,7 +193,12 @@ class RidgeProposal:
     Cholesky factor L_k of S_k. Between two points, ln g(v) is linear in v and the conditional is
     N((1−a) μ_k(v) + a μ_k+1(v), L(v) L(v)ᵀ), μ_j(v) = θ*_j,−i + b_j (v − v_j), L(v) = (1−a) L_k + a L_k+1,
     a = (v − v_k)/(v_k+1 − v_k); beyond the end points g has Gaussian tails of the end points' local sd
-    s and the end point's conditional. The density is continuous and exact (normalised analytically)."""
+    s and the end point's conditional. The density is continuous and exact (normalised analytically).
+
+    The factors may be block-sparse (``first``, ``shared``: :mod:`._ridge_kernels`): built for a run's
+    problem, the flights' rows below the shared ones keep their own flight's block only, as the Laplace
+    covariance of the arrow-structured precision has it (its other entries are rounding, ≤ 10⁻¹³ of the
+    block's on seed 18's 24 flights), and the per-point algebra skips the zeros."""
 
     index: int
     v: np.ndarray            # (K,) path values of θ_i, increasing
@@ -202,10 +207,24 @@ class RidgeProposal:
     means: np.ndarray        # (K, dim − 1) θ*_k,−i
     slopes: np.ndarray       # (K, dim − 1) b_k
     chols: np.ndarray        # (K, dim − 1, dim − 1) Cholesky factors of S_k
+    first: np.ndarray | None = None   # (dim − 1,) first column of every row's own block; None: dense
+    shared: int = 0                   # leading columns every row may use
 
     @classmethod
-    def from_path(cls, problem: Problem, path) -> "RidgeProposal":
+    def from_path(cls, problem: Problem, path, blocks=None) -> "RidgeProposal":
+        """The ridge proposal of a profile path (:mod:`.profile`).
+
+        Parameters
+        ----------
+        problem : Problem
+        path : ProfilePath
+        blocks : (int, sequence of slice), optional
+            The parameters every block may depend on (the first ``blocks[0]`` of θ: the shared ones, which
+            must include θ_i) and the blocks of θ that are independent given them (every flight's slice):
+            the factors are then block-sparse (:func:`flight_blocks`). None: dense factors.
+        """
         i = path.index
+        first, shared = (None, 0) if blocks is None else _block_structure(i, problem.dim, *blocks)
         pts = sorted((p for p in path.points if p.ok), key=lambda p: p.value)
         lp = problem.log_prob(np.array([p.theta for p in pts])) if pts else np.zeros(0)
         rest = np.r_[0:i, i + 1:problem.dim]
@@ -216,6 +235,8 @@ class RidgeProposal:
             S = p.cov
             b = S[rest, i] / S[i, i]
             L = scaled_cholesky(S[np.ix_(rest, rest)] - np.outer(b, S[i, rest]))
+            if first is not None:
+                L = L * _structure_mask(first, shared)
             v.append(p.value)
             s.append(np.sqrt(S[i, i]))
             lg.append(lpk + np.sum(np.log(np.diag(L))))
@@ -224,7 +245,14 @@ class RidgeProposal:
             chols.append(L)
         lg = np.array(lg)
         return cls(i, np.array(v), lg - lg.max() if lg.size else lg, np.array(s), np.array(means),
-                   np.array(slopes), np.array(chols))
+                   np.array(slopes), np.array(chols), first, shared)
+
+    @property
+    def _structure(self) -> tuple[np.ndarray, int]:
+        """(first, shared) for the compiled loops: a dense factor is first = 0, shared = 0."""
+        if self.first is None:
+            return np.zeros(self.chols.shape[1], np.int64), 0
+        return self.first, self.shared
 
     # -- the 1-D density g of θ_i -------------------------------------------------------------------------
     def _pieces(self):
@@ -270,26 +298,113 @@ class RidgeProposal:
         m1 = self.means[k + 1] + self.slopes[k + 1] * (vi - self.v[k + 1])[:, None]
         return k, a, (1 - a)[:, None] * m0 + a[:, None] * m1
 
-    def log_density(self, x: np.ndarray) -> np.ndarray:
-        """ln q(x) for points x (n, dim): ln g(x_i) + ln N(x_−i; mean(x_i), L(x_i) L(x_i)ᵀ), every point's
-        triangular system solved in one compiled pass (:func:`._ridge_kernels.interpolated_solve`: the
-        sampler evaluates this for every walker at every independence jump)."""
+    def whiten(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The conditional's whitened coordinates of points x (n, dim): z = L(x_i)⁻¹ (x_−i − mean(x_i)), every
+        point's triangular system solved in one compiled pass (:func:`._ridge_kernels.interpolated_whiten`:
+        the sampler does this for every walker at every independence jump).
+
+        Returns
+        -------
+        z : (n, dim − 1) array
+        log_det : (n,) array
+            ln |L(x_i)|.
+        """
         x = np.atleast_2d(x)
-        vi = x[:, self.index]
+        k, a, mean = self._segment(x[:, self.index])
+        return interpolated_whiten(self.chols, k, a, np.ascontiguousarray(np.delete(x, self.index, axis=1) - mean),
+                                   *self._structure)
+
+    def place(self, vi: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The inverse of :meth:`whiten`: points (n, dim) with θ_i = vi (n,) and θ_−i = mean(vi) + L(vi) z, z
+        (n, dim − 1); also ln |L(vi)| (n,)."""
         k, a, mean = self._segment(vi)
-        r = np.delete(x, self.index, axis=1) - mean
-        quad, log_det = interpolated_solve(self.chols, k, a, np.ascontiguousarray(r))
-        return self.log_g_density(vi) - 0.5 * r.shape[1] * np.log(2 * np.pi) - log_det - 0.5 * quad
+        rest = mean + interpolated_product(self.chols, k, a, np.ascontiguousarray(z), *self._structure)
+        diag = np.diagonal(self.chols, axis1=1, axis2=2)
+        log_det = np.log((1 - a)[:, None] * diag[k] + a[:, None] * diag[k + 1]).sum(axis=1)
+        return np.insert(rest, self.index, vi, axis=1), log_det
+
+    def block_conditionals(self, x: np.ndarray, shared: int, blocks) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The ridge's conditional of each block of parameters given θ_i and the first ``shared`` other
+        parameters, at points x (n, dim), from the lower-triangular factor alone: θ_b = m_b(v) + L_bs(v) z_s +
+        L_bb(v) z_b with z_s = L_ss(v)⁻¹ (θ_s − m_s(v)). It is the ridge's exact conditional when the blocks are
+        independent given θ_s (the flights given the shared parameters: the Laplace covariance of an arrow
+        precision, whose factor is block-diagonal below the shared rows to rounding, 10⁻¹³ of its entries);
+        as a proposal it is exact in any case.
+
+        Parameters
+        ----------
+        x : (n, dim) array
+        shared : int
+            s, the parameters of θ_−i before the blocks (all indices below ``shared`` + 1 except i).
+        blocks : sequence of slice
+            Blocks of θ (indices ≥ s + 1), e.g. every flight's slice of the parameter layout.
+
+        Returns
+        -------
+        list of (mean (n, p_b), chol (n, p_b, p_b)) per block
+        """
+        x = np.atleast_2d(x)
+        k, a, mean = self._segment(x[:, self.index])
+        rest = np.delete(x, self.index, axis=1)
+        cols = np.arange(shared)
+
+        def factor(rows, c):
+            """L(v)[rows, c] of every point (n, len(rows), len(c))."""
+            at = (rows[None, :, None], c[None, None, :])
+            lo, hi = self.chols[(k[:, None, None],) + at], self.chols[(k[:, None, None] + 1,) + at]
+            return (1 - a)[:, None, None] * lo + a[:, None, None] * hi
+
+        z_s = np.linalg.solve(factor(cols, cols), (rest[:, :shared] - mean[:, :shared])[..., None])[..., 0]
+        out = []
+        for b in blocks:
+            rows = np.arange(b.start, b.stop)
+            rows = rows - (rows > self.index)
+            out.append((mean[:, rows] + np.einsum("npq,nq->np", factor(rows, cols), z_s), factor(rows, rows)))
+        return out
+
+    def log_density(self, x: np.ndarray) -> np.ndarray:
+        """ln q(x) for points x (n, dim): ln g(x_i) + ln N(x_−i; mean(x_i), L(x_i) L(x_i)ᵀ) (:meth:`whiten`)."""
+        x = np.atleast_2d(x)
+        z, log_det = self.whiten(x)
+        return (self.log_g_density(x[:, self.index]) - 0.5 * z.shape[1] * np.log(2 * np.pi) - log_det
+                - 0.5 * np.einsum("nd,nd->n", z, z))
 
     def draw(self, n: int, random) -> np.ndarray:
         vi = self.draw_g(n, random)
-        k, a, mean = self._segment(vi)
-        rest = mean + interpolated_product(self.chols, k, a, random.randn(n, self.means.shape[1]))
-        return np.insert(rest, self.index, vi, axis=1)
+        return self.place(vi, random.randn(n, self.means.shape[1]))[0]
 
     def arrays(self) -> dict:
-        return {"index": np.array(self.index), "v": self.v, "log_g": self.log_g, "s": self.s,
-                "means": self.means, "slopes": self.slopes, "chols": self.chols}
+        out = {"index": np.array(self.index), "v": self.v, "log_g": self.log_g, "s": self.s,
+               "means": self.means, "slopes": self.slopes, "chols": self.chols}
+        if self.first is not None:
+            out.update(first=self.first, shared=np.array(self.shared))
+        return out
+
+
+def flight_blocks(problem: Problem) -> tuple[int, list[slice]]:
+    """The problem's arrow structure for :meth:`RidgeProposal.from_path`: the shared parameters' count and
+    every flight's slice of θ."""
+    return problem.ic_start, [problem.layout.flight_slice(k) for k in range(problem.n_flights)]
+
+
+def _block_structure(i: int, dim: int, n_shared: int, slices) -> tuple[np.ndarray, int]:
+    """``first`` and ``shared`` of a ridge along θ_i (rows and columns of θ_−i) for shared parameters
+    θ_0 … θ_(n_shared − 1) and blocks ``slices`` of θ, all after them."""
+    if not 0 <= i < n_shared:
+        raise ValueError(f"ridge along parameter {i}: block-sparse factors need it among the {n_shared} shared ones")
+    first = np.zeros(dim - 1, np.int64)
+    for sl in slices:
+        if sl.start < n_shared:
+            raise ValueError(f"block {sl} overlaps the {n_shared} shared parameters")
+        first[sl.start - 1:sl.stop - 1] = sl.start - 1
+    return first, n_shared - 1
+
+
+def _structure_mask(first: np.ndarray, shared: int) -> np.ndarray:
+    """(d, d) bool: the entries a block-sparse factor keeps (:mod:`._ridge_kernels`)."""
+    r = np.arange(first.size)[:, None]
+    c = np.arange(first.size)[None, :]
+    return (c < np.minimum(r, shared)) | ((c >= np.maximum(first[:, None], np.minimum(r, shared))) & (c <= r))
 
 
 @dataclass(frozen=True)
@@ -346,6 +461,8 @@ class CompositeProposal:
                                              z[f"{j}_mixture_log_weights"]))
             else:
                 a = {k: z[f"{j}_ridge_{k}"] for k in ("v", "log_g", "s", "means", "slopes", "chols")}
+                if f"{j}_ridge_first" in z:     # block-sparse factors (files written before stop 38: dense)
+                    a.update(first=z[f"{j}_ridge_first"], shared=int(z[f"{j}_ridge_shared"]))
                 parts.append(RidgeProposal(index=int(z[f"{j}_ridge_index"]), **a))
         return cls(tuple(parts), z["log_weights"])
 
@@ -354,7 +471,7 @@ def independence_proposal(problem: Problem, theta_hat: np.ndarray, cov_hat: np.n
     """The Laplace approximation N(θ̂, Σ̂) (weight ``CENTRAL_WEIGHT``, or 1 if no path departs) plus, in equal
     shares, a :class:`RidgeProposal` along every profile path that departs from it (:func:`path_departure`)."""
     laplace = MixtureProposal.from_components([theta_hat], [cov_hat], [0.0])
-    ridges = [RidgeProposal.from_path(problem, p) for p in paths
+    ridges = [RidgeProposal.from_path(problem, p, flight_blocks(problem)) for p in paths
               if path_departure(p, theta_hat, cov_hat) > PROFILE_DEPARTURE]
     ridges = [r for r in ridges if r.v.size >= 2]
     if not ridges:

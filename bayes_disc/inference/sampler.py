@@ -9,24 +9,30 @@
 * Moves: Metropolis–Hastings moves with exact acceptance ratios (each leaves the posterior invariant),
   mixed with emcee's differential-evolution moves:
   - block moves (:mod:`.moves`, a ``block_fraction`` share, used when the walkers are fewer than
-    2·dim + 2: by default on runs whose 2·dim + 2 exceeds ``WALKERS_CAP``): Metropolis-within-Gibbs sweeps
-    over the flights' own blocks (one flight's simulation per proposal) and shared random-walk steps that
-    carry every flight along its regression on the shared parameters; with them the ensembles need only
-    2·(s + p_max) + 2 walkers (s shared parameters, p_max the largest flight block) instead of 2·dim + 2,
-    so a step's cost grows with the flights only through their simulations;
+    2·dim + 2: by default on runs whose 2·dim + 2 exceeds ``WALKERS_CAP``): sweeps over the flights that
+    update every flight's own block given the shared parameters (one flight's simulation per proposal),
+    drawing it afresh from a ridge proposal's conditional (:class:`.moves.RidgeFlightRefresh`) or by a
+    random walk (:class:`.moves.FlightBlockMove`); without ridge proposals, random-walk sweeps and shared
+    random-walk steps that carry every flight along its regression on the shared parameters. With them
+    the ensembles need only 2·(s + p_max) + 2 walkers (s shared parameters, p_max the largest flight
+    block) instead of 2·dim + 2, so a step's cost grows with the flights only through their simulations;
   - independence jumps from :func:`.proposals.independence_proposal`: the Laplace approximation plus a
     ridge proposal along every profile-likelihood path (:mod:`.profile`) that departs from it. A weakly
     identified combination (the demo's CM0 and CMq with the flights' wobble initial conditions) makes
     a thin curved valley that a Gaussian cannot cover and that local moves cross only over thousands
-    of steps; the ridge proposals follow the valley, so the jumps reach all of it. They are the whole
-    Metropolis–Hastings share: the independence proposal's weights and the Gaussian reference (the block
-    moves' shape) are re-fitted to the pooled ensembles' samples twice during warm-up (after
-    ``adapt_steps`` and 2·``adapt_steps`` steps), fixed afterwards, and the warm-up is discarded as burn-in;
+    of steps; the ridge proposals follow the valley, so the jumps reach all of it. The independence
+    proposal's weights and the Gaussian reference (the random-walk sweeps' shape) are re-fitted to the
+    pooled ensembles' samples twice during warm-up (after ``adapt_steps`` and 2·``adapt_steps`` steps),
+    fixed afterwards, and the warm-up is discarded as burn-in;
+  - ridge carries (:class:`.moves.RidgeCarry`, half of the Metropolis–Hastings share when there are
+    ridge proposals): the coefficients drawn afresh along a ridge while every flight keeps its whitened
+    place across the valley, so that their acceptance does not fall as flights are added (an independence
+    jump redraws every flight too, and pays the proposal's misfit in all of their dimensions);
   - emcee's DE moves, mostly with γ scaled down (local steps accepted often), some at the default γ,
     and snooker moves.
-  The Metropolis–Hastings moves have the larger share (``independence_fraction``, default 0.8): their
-  jumps do not depend on where the other walkers are. DE moves do, and in ~60 dimensions an ensemble
-  that has contracted re-expands under them only over thousands of steps (an exact Gaussian with the
+  The Metropolis–Hastings moves (independence jumps and ridge carries) have the larger share
+  (``independence_fraction``, default 0.8): their jumps do not depend on where the other walkers are.
+  DE moves do, and in ~60 dimensions an ensemble that has contracted re-expands under them only over thousands of steps (an exact Gaussian with the
   AR(1) campaign's posterior covariance: DE alone held an ensemble started at 0.83 of the sd at 0.78
   for 2000 steps) — a contraction every ensemble shares, which R-hat, ESS and τ cannot see. With a 0.3
   share the posteriors stopped 5–19 % too narrow (tests/test_sample.py, the AR(1) importance-sampling
@@ -57,8 +63,9 @@ from .backend import RoundBackend
 from .config import SamplerSettings
 from .diagnostics_mcmc import ess_bulk, rhat_across
 from .model import Problem
-from .moves import FlightBlockMove, IndependenceJump, SharedShift, block_factors
-from .proposals import CompositeProposal, Proposal
+from .moves import (FlightBlockMove, IndependenceJump, RidgeCarry, RidgeFlightRefresh, SharedShift,
+                    block_factors)
+from .proposals import CompositeProposal, Proposal, RidgeProposal
 
 logger = logging.getLogger(__name__)
 
@@ -75,6 +82,17 @@ ADAPTATIONS = 2
 # coefficients' smallest bulk ESS 879 → 1141 (4 flights, steps 150–300) and 805 → 1006 (12 flights,
 # 175–350), τ 14.3 → 12.8 and 18.6 → 15.8 steps.
 
+#: Share of the Metropolis–Hastings moves given to ridge carries (:class:`.moves.RidgeCarry`) when the
+#: independence proposal has ridge proposals; the rest are independence jumps. Measured at stop 38 from the
+#: stationary walkers of seed 18's kept runs (benchmarks/bench_scale.py, one move alone for 20 steps):
+#: ridge carries accepted 27 %, 36 %, 35 % at 4, 12, 24 flights with mean squared jumps of 0.41–0.71,
+#: 0.44–0.88, 0.36–0.76 posterior variances per coefficient and step, independence jumps 13 %, 14 %, 6 %
+#: with 0.20–0.31, 0.22–0.30, 0.09–0.18. Carries keep the flights' whitened places, which the independence
+#: jumps redraw: at 4 flights (no flight-block sweeps) those jumps keep half of the share. (With this
+#: share and the old block moves, random-walk sweeps and shared shifts, seed 18's 24-flight chain needed
+#: 700 steps, τ 30 steps in the initial conditions; with the refresh sweeps below, 300.)
+CARRY_SHARE = 0.5
+
 #: Within the DE share: emcee's DE move with γ scaled down (accepted ~30 % on the demo posterior,
 #: against ~4 % for the default γ = 2.38/√(2·dim)), the default DE move and the snooker move.
 DE_SCALE = 0.35
@@ -84,6 +102,12 @@ DE_MIX = ((DE_SCALE, 0.7), (1.0, 0.15), ("snooker", 0.15))
 #: Within the block share: Metropolis-within-Gibbs sweeps over the flights' own blocks, and shared shifts
 #: that carry the flights along (:mod:`.moves`).
 BLOCK_MIX = (("gibbs", 0.6), ("shift", 0.4))
+#: The block share when the independence proposal has ridge proposals: sweeps that draw every flight afresh
+#: from a ridge's conditional (:class:`.moves.RidgeFlightRefresh`) and the random-walk sweeps. The shared
+#: shifts are left out: on seed 18's 24-flight walkers they were accepted 0.5 % of the time (their
+#: regression is linear, the valley is not), while the refresh sweeps moved the flights' initial conditions
+#: by 1.27 posterior variances per step (median; random-walk sweeps 0.056, independence jumps 0.11).
+RIDGE_BLOCK_MIX = (("refresh", 0.7), ("gibbs", 0.3))
 
 
 def uses_block_moves(block_fraction: float, walkers: int, dim: int) -> bool:
@@ -105,15 +129,26 @@ def _moves(problem: Problem, proposal: Proposal, independence: CompositeProposal
     if walkers is not None and not uses_block_moves(block_fraction, walkers, problem.dim):
         block_fraction = 0.0
     moves = []
+    ridges = [j for j, q in enumerate(independence.parts) if isinstance(q, RidgeProposal)]
+    ridge_parts = tuple(independence.parts[j] for j in ridges)
+    ridge_weights = independence.log_weights[ridges]
     if block_fraction > 0:
         conditional, shared, regression = block_factors(problem, proposal.cov)
-        for kind, share in BLOCK_MIX:
-            move = (FlightBlockMove(problem, conditional) if kind == "gibbs"
-                    else emcee.moves.MHMove(SharedShift(shared, regression)))
+        for kind, share in (RIDGE_BLOCK_MIX if ridges else BLOCK_MIX):
+            if kind == "gibbs":
+                move = FlightBlockMove(problem, conditional)
+            elif kind == "refresh":
+                move = RidgeFlightRefresh(problem, ridge_parts, ridge_weights)
+            else:
+                move = emcee.moves.MHMove(SharedShift(shared, regression))
             moves.append((move, block_fraction * share))
     rest = 1.0 - block_fraction
     if fraction > 0:
-        moves.append((IndependenceJump(independence), rest * fraction))
+        carry = CARRY_SHARE if ridges else 0.0
+        moves.append((IndependenceJump(independence), rest * fraction * (1 - carry)))
+        if carry:
+            move = emcee.moves.MHMove(RidgeCarry(ridge_parts, ridge_weights, fresh=problem.ic_start - 1))
+            moves.append((move, rest * fraction * carry))
     if fraction < 1:
         g0 = 2.38 / np.sqrt(2 * problem.dim)
         for kind, share in DE_MIX:
