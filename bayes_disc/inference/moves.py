@@ -157,7 +157,6 @@ class FlightBlockMove(_FlightSweep):
         return coords[:, self.problem.layout.flight_slice(k)] + step, np.zeros(coords.shape[0])
 
 
-
 class RidgeFlightRefresh(_FlightSweep):
     """A sweep over the flights that draws every flight's block afresh from a ridge proposal's conditional
     given the shared parameters (an independence proposal per flight, given θ_s):
@@ -188,10 +187,12 @@ class RidgeFlightRefresh(_FlightSweep):
         w = np.exp(self.log_weights - np.max(self.log_weights))
         pick = random.choice(len(self.ridges), size=nw, p=w / w.sum())
         blocks = [p.layout.flight_slice(k) for k in range(p.n_flights)]
-        out = [(np.empty((nw, b.stop - b.start)), np.empty((nw, b.stop - b.start, b.stop - b.start))) for b in blocks]
+        sizes = [b.stop - b.start for b in blocks]
+        out = [(np.empty((nw, n)), np.empty((nw, n, n))) for n in sizes]
         for j in np.unique(pick):
             at = pick == j
-            for (mean, chol), (m, L) in zip(out, self.ridges[j].block_conditionals(coords[at], p.ic_start - 1, blocks)):
+            conditionals = self.ridges[j].block_conditionals(coords[at], p.ic_start - 1, blocks)
+            for (mean, chol), (m, L) in zip(out, conditionals):
                 mean[at], chol[at] = m, L
         self._conditionals = out
 
@@ -199,7 +200,8 @@ class RidgeFlightRefresh(_FlightSweep):
         mean, L = self._conditionals[k]
         xi = random.randn(*mean.shape)
         old = np.linalg.solve(L, (coords[:, self.problem.layout.flight_slice(k)] - mean)[..., None])[..., 0]
-        return mean + np.einsum("npq,nq->np", L, xi), 0.5 * np.sum(xi * xi, axis=1) - 0.5 * np.sum(old * old, axis=1)
+        log_factor = 0.5 * np.sum(xi * xi, axis=1) - 0.5 * np.sum(old * old, axis=1)
+        return mean + np.einsum("npq,nq->np", L, xi), log_factor
 
 @dataclass(frozen=True)
 class SharedShift:
