@@ -84,6 +84,13 @@ def block_factors(problem: Problem, cov: np.ndarray) -> tuple[list[np.ndarray], 
     return conditional, scaled_cholesky(Sss), regression
 
 
+def pick_ridges(log_weights: np.ndarray, n: int, random) -> np.ndarray:
+    """A ridge for each of n walkers (n,), drawn with the (unnormalised) log weights: the choice the ridge
+    moves make per walker, independent of where the walker is (so a mixture of exact moves stays exact)."""
+    w = np.exp(log_weights - np.max(log_weights))
+    return random.choice(len(log_weights), size=n, p=w / w.sum())
+
+
 class _FlightSweep(Move):
     """A Metropolis-within-Gibbs sweep over every flight's own block θ_k, given the shared parameters θ_s
     (unchanged by the sweep): for every flight k a proposal θ_k′ from :meth:`block_proposal` with its log
@@ -184,8 +191,7 @@ class RidgeFlightRefresh(_FlightSweep):
 
     def prepare(self, coords, random):
         p, nw = self.problem, coords.shape[0]
-        w = np.exp(self.log_weights - np.max(self.log_weights))
-        pick = random.choice(len(self.ridges), size=nw, p=w / w.sum())
+        pick = pick_ridges(self.log_weights, nw, random)
         blocks = [p.layout.flight_slice(k) for k in range(p.n_flights)]
         sizes = [b.stop - b.start for b in blocks]
         out = [(np.empty((nw, n)), np.empty((nw, n, n))) for n in sizes]
@@ -315,8 +321,7 @@ class RidgeCarry:
     fresh: int = 0
 
     def __call__(self, coords, random):
-        w = np.exp(self.log_weights - np.max(self.log_weights))
-        pick = random.choice(len(self.ridges), size=coords.shape[0], p=w / w.sum())
+        pick = pick_ridges(self.log_weights, coords.shape[0], random)
         new = coords.copy()
         factor = np.zeros(coords.shape[0])
         for j in np.unique(pick):
