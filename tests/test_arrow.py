@@ -7,8 +7,10 @@ from scipy.optimize import least_squares
 
 from bayes_disc.inference.arrow import ArrowJacobian
 from bayes_disc.inference.initial import initial_state_from_data
-from bayes_disc.inference.leastsq import (covariance_from_jacobian, jacobian_blocks, minimise, refine_least_squares,
-                                          whitened_jacobian, whitened_residuals, _rms)
+from bayes_disc.inference import profile
+from bayes_disc.inference.leastsq import (MU_NEAR, START_DECREMENT, covariance_from_jacobian, decrement,
+                                          jacobian_blocks, minimise, refine_least_squares, whitened_jacobian,
+                                          whitened_residuals, _rms)
 from bayes_disc.inference.model import Problem
 from bayes_disc.observation.synth import DEFAULT_MARKERS, LaunchSpec, SynthSpec, synthesize
 
@@ -116,6 +118,48 @@ def test_new_solver_matches_the_dense_optimum_and_covariance(small_problem):
     out = ls.to_dict()
     assert out["rms_mm"] == {f.name: pytest.approx(1e3 * s) for f, s in zip(p.flights, ls.sigma)}
     assert out["noise"] == {f"sigma_{f.name}": {"value": s, "unit": "m"} for f, s in zip(p.flights, ls.sigma)}
+
+
+def test_profile_fits_started_near_the_optimum_reach_it(small_problem):
+    """A profile point's fit (:func:`profile._fixed_fit`, little initial damping: ``MU_NEAR``) ends within the
+    deviance tolerance of the constrained optimum found by a tight fit, for a point one and three sds out; and
+    refitting a converged optimum with ``MU_NEAR`` stays there."""
+    p = small_problem
+    sigma = p.nominal_noise
+    best = minimise(p, p.start_vector(), sigma, max_nfev=200, xtol=1e-13, ftol=1e-13)
+    assert best.status > 0, best.message
+    cov = jacobian_blocks(best.x, p, sigma).information().inverse()
+    again = minimise(p, best.x, sigma, mu0=MU_NEAR, xtol=1e-13, ftol=1e-13)
+    assert again.cost <= best.cost + 1e-9 and again.njev <= 3
+    for index in (1, 7):                                   # CLa and CMq
+        for t in (1.0, -3.0):
+            value = best.x[index] + t * np.sqrt(cov[index, index])
+            x, cost, ok = profile._fixed_fit(p, sigma, best.x, cov, index, value, 40, best.cost)
+            assert ok and x[index] == value
+            free = np.ones(p.dim, bool)
+            free[index] = False
+            tight = minimise(p, x, sigma, free=free, max_nfev=200, xtol=1e-13, ftol=1e-13)
+            assert 0.0 <= 2 * (cost - tight.cost) < profile.DEVIANCE_TOL
+
+
+def test_the_decrement_is_half_the_gradients_inverse_information_norm():
+    J = _random_jacobian(np.random.default_rng(3))
+    rng = np.random.default_rng(4)
+    r = tuple(rng.normal(size=B.shape[0]) for B in J.blocks)
+    g = J.gradient(r, rng.normal(size=J.n))
+    D = J.dense()
+    assert decrement(J.information(), g) == pytest.approx(0.5 * g @ np.linalg.solve(D.T @ D, g), rel=1e-8)
+
+
+def test_a_start_stops_near_its_optimum(small_problem):
+    """With ``dtol`` (the least-squares starts: START_DECREMENT) the fit stops once the Gauss–Newton model
+    expects less than that still to gain: close above the full fit's optimum, with fewer Jacobians."""
+    p = small_problem
+    x0 = p.start_vector()
+    full = minimise(p, x0, p.nominal_noise, max_nfev=200, xtol=1e-13, ftol=1e-13)
+    early = minimise(p, x0, p.nominal_noise, max_nfev=200, dtol=START_DECREMENT)
+    assert early.status == 4 and early.njev < full.njev
+    assert 0.0 <= early.cost - full.cost < 5 * START_DECREMENT
 
 
 def test_held_parameters_stay_put(small_problem):

@@ -26,7 +26,7 @@ class LeastSquaresResult:
     cov: np.ndarray              # (dim, dim) Gauss–Newton covariance (prior included)
     cost: float                  # ½ Σ whitened residual² at the optimum
     condition_number: float      # of the scale-free (correlation-normalised) information matrix
-    start_costs: list            # final cost of every start
+    start_costs: list            # cost where every start stopped (nominal noise; within START_DECREMENT of its optimum)
     nfev: int
     message: str
     names: list
@@ -211,25 +211,39 @@ class Minimum:
     cost: float              # ½ Σ whitened residual² (prior included)
     nfev: int                # residual evaluations
     njev: int                # Jacobian evaluations
-    status: int              # > 0 converged (1 gradient, 2 step, 3 cost), 0 budget spent, −1 no descent possible
+    status: int              # > 0 converged (1 gradient, 2 step, 3 cost, 4 decrement), 0 budget spent, −1 no descent
     message: str
 
 
 #: Levenberg–Marquardt's stopping rule on the gradient: max |g_i · sd_i| (scale-free)
 GTOL = 1e-10
+#: Levenberg–Marquardt's initial damping μ₀ (relative to diag H, i.e. on the unit-diagonal scaled matrix) from a
+#: start that may be far from the optimum. Madsen, Nielsen & Tingleff (2004, "Methods for non-linear least
+#: squares problems", §3.2) advise μ₀ = τ · max diag, τ = 10⁻⁶ if x₀ is believed to be a good approximation
+#: of the optimum, else 10⁻³ or even 1.
+MU_FAR = 1e-3
+#: μ₀ from a start next to an optimum (a profile point's conditional start, a converged fit refined with new
+#: noise scales). The scaled information matrix has eigenvalues down to 2·10⁻⁶ along the ridges of the
+#: synthetic benchmark (4 and 24 flights), so μ₀ = 10⁻³ damps the first steps along them ~500-fold, and μ
+#: takes several Jacobians to fall below them (Nielsen's rule: at most ×1/3 per step). Profile fits took 4.2
+#: and 6.9 Jacobians each at 4 and 24 flights with 10⁻³, 3.0 and 3.1 with 10⁻⁶, and ended closer to the
+#: constrained optimum (``benchmarks/bench_profile_fits.py``).
+MU_NEAR = 1e-6
 
 
 def minimise(problem: Problem, x0: np.ndarray, sigma: np.ndarray, free: np.ndarray | None = None,
-             max_nfev: int = 200, xtol: float = 1e-10, ftol: float = 1e-10) -> Minimum:
+             max_nfev: int = 200, xtol: float = 1e-10, ftol: float = 1e-10, mu0: float = MU_FAR,
+             dtol: float = 0.0) -> Minimum:
     """Levenberg–Marquardt on ½ |whitened residuals|² with the block-arrow normal equations (:mod:`.arrow`):
     every step costs one Jacobian (one batched simulation per flight) and a Schur solve, both linear in the
     number of flights.
 
-    Damping: (H + μ diag H) δ = −g, μ updated by Nielsen's rule (× max(1/3, 1 − (2ρ − 1)³) after a step
-    with gain ratio ρ > 0; × ν, ν doubling, after a rejected one). Stops when the step is below
-    ``xtol`` (relative, in prior-sd units), when an accepted step lowers the cost by less than ``ftol``
-    of it (with ρ > 1/4), when the scale-free gradient is below :data:`GTOL`, or after ``max_nfev``
-    residual evaluations.
+    Damping: (H + μ diag H) δ = −g, μ starting at ``mu0`` and updated by Nielsen's rule (× max(1/3,
+    1 − (2ρ − 1)³) after a step with gain ratio ρ > 0; × ν, ν doubling, after a rejected one). Stops when
+    the step is below ``xtol`` (relative, in prior-sd units), when an accepted step lowers the cost by less
+    than ``ftol`` of it (with ρ > 1/4), when the scale-free gradient is below :data:`GTOL`, when the
+    Gauss–Newton decrement ½ gᵀH⁻¹g (what the quadratic model still expects to gain) is at most ``dtol``, or
+    after ``max_nfev`` residual evaluations.
 
     Parameters
     ----------
@@ -244,6 +258,11 @@ def minimise(problem: Problem, x0: np.ndarray, sigma: np.ndarray, free: np.ndarr
         Budget of residual evaluations.
     xtol, ftol : float
         Tolerances on the step and on the cost's decrease.
+    mu0 : float
+        Initial damping μ₀: :data:`MU_FAR` from a start that may be far from the optimum, :data:`MU_NEAR`
+        from one next to it.
+    dtol : float
+        Tolerance on the Gauss–Newton decrement (units of the cost, ½ χ²); 0 (default): not used.
 
     Returns
     -------
@@ -259,7 +278,7 @@ def minimise(problem: Problem, x0: np.ndarray, sigma: np.ndarray, free: np.ndarr
         return parts, prior, 0.5 * float(sum(p @ p for p in parts) + prior @ prior)
 
     parts, prior, cost = evaluate(x)
-    nfev, njev, mu, nu = 1, 0, 1e-3, 2.0
+    nfev, njev, mu, nu = 1, 0, float(mu0), 2.0
     status, message = 0, "evaluation budget spent"
     J = None
     while True:
@@ -270,6 +289,9 @@ def minimise(problem: Problem, x0: np.ndarray, sigma: np.ndarray, free: np.ndarr
             g = J.gradient(parts, prior[free])
             if np.max(np.abs(g * sd), initial=0.0) < GTOL:
                 status, message = 1, "gradient below tolerance"
+                break
+            if dtol > 0.0 and decrement(H, g) <= dtol:
+                status, message = 4, "decrement below tolerance"
                 break
         if nfev >= max_nfev:
             break
@@ -305,6 +327,27 @@ def minimise(problem: Problem, x0: np.ndarray, sigma: np.ndarray, free: np.ndarr
     return Minimum(x=x, cost=cost, nfev=nfev, njev=njev, status=status, message=message)
 
 
+def decrement(H, g: np.ndarray) -> float:
+    """The Gauss–Newton decrement ½ gᵀH⁻¹g: the cost decrease the quadratic model predicts for its full step
+    (∞ where H is not positive definite).
+
+    Parameters
+    ----------
+    H : ArrowMatrix
+        Gauss–Newton information JᵀJ over the n unknowns.
+    g : (n,) array
+        Gradient Jᵀr.
+
+    Returns
+    -------
+    float
+    """
+    try:
+        return 0.5 * float(g @ H.solve(g))
+    except np.linalg.LinAlgError:
+        return np.inf
+
+
 def covariance_at(J: ArrowJacobian, free: np.ndarray) -> np.ndarray:
     """(dim, dim) Gauss–Newton covariance (JᵀJ)⁻¹ from a block Jacobian over the ``free`` parameters (held
     parameters' rows and columns zero)."""
@@ -329,9 +372,17 @@ def _starts(problem: Problem, n: int, rng: np.random.Generator) -> list[np.ndarr
     return out[:n]
 
 
+#: a least-squares start stops once the Gauss–Newton decrement is at most this (½ χ² units): near enough its
+#: optimum to rank the starts, after which only the best is refined to the full tolerance. On bench_scale's
+#: seed-18 data (4 and 24 flights) the starts then take 82 and 114 Jacobians in all instead of 109 and 159,
+#: and the refined optimum moves by < 10⁻⁴ sd
+START_DECREMENT = 0.1
+
+
 def fit_least_squares(problem: Problem, starts: int = 4, max_nfev: int = 200, seed: int = 0,
                       sigma0: float | None = None, progress=None) -> LeastSquaresResult:
-    """Joint least squares from several starts; the best is refined with per-flight noise scales.
+    """Joint least squares from several starts, each to within :data:`START_DECREMENT` of its optimum; the
+    best is refined with per-flight noise scales, to the full tolerance.
 
     Parameters
     ----------
@@ -360,14 +411,15 @@ def fit_least_squares(problem: Problem, starts: int = 4, max_nfev: int = 200, se
     results = []
     x0s = _starts(problem, starts, rng)
     for i, x0 in enumerate(x0s):
-        res = minimise(problem, x0, sigma, max_nfev=max_nfev)
+        res = minimise(problem, x0, sigma, max_nfev=max_nfev, dtol=START_DECREMENT)
         results.append(res)
         if progress is not None:
             progress(i + 1, len(x0s), float(res.cost))
     if progress is not None:
         progress(len(x0s), len(x0s), None)
     best = min(results, key=lambda r: r.cost)
-    out = refine_least_squares(problem, best.x, max_nfev=max_nfev)
+    # a converged start is next to the optimum the new noise scales move: little damping at first
+    out = refine_least_squares(problem, best.x, max_nfev=max_nfev, mu0=MU_NEAR if best.status > 0 else MU_FAR)
     out.start_costs = [float(r.cost) for r in results]
     out.nfev += int(sum(r.nfev for r in results))
     check_fit_plausible(out, problem)  # an RMS far above any marker noise stops here, before sampling
@@ -375,7 +427,7 @@ def fit_least_squares(problem: Problem, starts: int = 4, max_nfev: int = 200, se
 
 
 def refine_least_squares(problem: Problem, x0: np.ndarray, max_nfev: int = 200, rounds: int = 2,
-                         free: np.ndarray | None = None) -> LeastSquaresResult:
+                         free: np.ndarray | None = None, mu0: float = MU_FAR) -> LeastSquaresResult:
     """From x0: estimate each flight's σ from its residuals and refit (``rounds`` times), then the
     Gauss–Newton covariance at the optimum.
 
@@ -391,6 +443,8 @@ def refine_least_squares(problem: Problem, x0: np.ndarray, max_nfev: int = 200, 
     free : (dim,) bool array, optional
         Parameters fitted; the others are held at their ``x0`` values (their covariance rows and columns
         are zero). Default: all.
+    mu0 : float
+        Initial damping of every round (:func:`minimise`): :data:`MU_NEAR` when x0 is a converged optimum.
 
     Returns
     -------
@@ -399,7 +453,7 @@ def refine_least_squares(problem: Problem, x0: np.ndarray, max_nfev: int = 200, 
     x, nfev, res = np.asarray(x0, float).copy(), 0, None
     free = np.ones(x.size, bool) if free is None else np.asarray(free, bool)
     for _ in range(rounds):
-        res = minimise(problem, x, _rms(problem, x), free=free, max_nfev=max_nfev, xtol=1e-12, ftol=1e-12)
+        res = minimise(problem, x, _rms(problem, x), free=free, max_nfev=max_nfev, xtol=1e-12, ftol=1e-12, mu0=mu0)
         x, nfev = res.x, nfev + res.nfev
     sigma = _rms(problem, x)
     J = jacobian_blocks(x, problem, sigma, free)

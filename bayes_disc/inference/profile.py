@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..physics.parallel import mp_context
-from .leastsq import jacobian_blocks, minimise, whitened_residuals
+from .leastsq import MU_NEAR, jacobian_blocks, minimise, whitened_residuals
 from .model import Problem
 
 #: the path stops past this profile deviance (≈ 3.5 σ for a Gaussian)
@@ -197,13 +197,15 @@ def conditional_start(x: np.ndarray, cov: np.ndarray, index: int, value: float) 
 
 
 def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, cov0: np.ndarray, index: int, value: float,
-               max_nfev: int, cost0: float):
+               max_nfev: int, cost0: float, mu0: float = MU_NEAR):
     """Optimum of every parameter but ``index`` (held at ``value``): (θ*, cost, converged). It starts from the
     better (lower cost) of x0 with θ_i set to ``value`` and :func:`conditional_start` (x0, cov0): on the
     24-flight benchmark the latter halves the Jacobians per fit (7.2 → 3.6 at 4 flights, 8.4 → 5.1 at 24)
     and the former guards a curved ridge where the linear prediction overshoots. The fit stops when a step
     lowers the deviance 2 Δcost by less than :data:`DEVIANCE_TOL` (``cost0``: the optimum's cost, which turns
-    it into the minimiser's relative tolerance)."""
+    it into the minimiser's relative tolerance). Both starts are next to the constrained optimum, so the fit
+    starts with little damping ``mu0`` (:data:`.leastsq.MU_NEAR`: 3.0–3.1 Jacobians per fit at 4–24 flights,
+    against 4.2–6.9 with :data:`.leastsq.MU_FAR`)."""
     free = np.ones(x0.size, bool)
     free[index] = False
     held = x0.copy()
@@ -212,13 +214,14 @@ def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, cov0: np.nda
     costs = [0.5 * float(np.sum(np.square(whitened_residuals(z, problem, sigma)))) for z in starts]
     x = starts[int(np.argmin(costs))]
     ftol = 0.5 * DEVIANCE_TOL / max(cost0, 1e-300)
-    res = minimise(problem, x, sigma, free=free, max_nfev=max_nfev, ftol=ftol)
+    res = minimise(problem, x, sigma, free=free, max_nfev=max_nfev, ftol=ftol, mu0=mu0)
     return res.x, float(res.cost), bool(res.status > 0)
 
 
 def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov_hat: np.ndarray, index: int,
                  side: float, max_deviance: float = MAX_DEVIANCE, max_points: int = MAX_POINTS,
-                 max_nfev: int = 40, extended_points: int = EXTENDED_POINTS) -> list[ProfilePoint]:
+                 max_nfev: int = 40, extended_points: int = EXTENDED_POINTS,
+                 mu0: float = MU_NEAR) -> list[ProfilePoint]:
     """The points on one side (``side`` = +1: values above θ̂_i, −1: below) of parameter ``index``'s profile
     through the least-squares optimum ``theta_hat`` (noise ``sigma``, covariance ``cov_hat``).
 
@@ -228,7 +231,7 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
     the deviance stays below ``max_deviance``, and past ``max_deviance`` once the Laplace marginal ln g
     (module docstring) has fallen by ``max_deviance``/2 from its highest value on that side, or after
     ``extended_points`` points (:func:`side_done`). The two sides start from θ̂ and do not depend on each
-    other.
+    other. ``mu0`` is every fit's initial damping (:func:`.leastsq.minimise`).
 
     Returns
     -------
@@ -243,7 +246,7 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
     x, cov, step, best = theta_hat.copy(), cov_hat, sd0, 0.0
     for k in range(max(max_points, extended_points)):
         value = float(x[index] + side * step)
-        x_new, cost, ok = _fixed_fit(problem, sigma, x, cov, index, value, max_nfev, cost0)
+        x_new, cost, ok = _fixed_fit(problem, sigma, x, cov, index, value, max_nfev, cost0, mu0)
         if not (ok and np.isfinite(cost)):
             break
         cov = jacobian_blocks(x_new, problem, sigma).information().inverse()
