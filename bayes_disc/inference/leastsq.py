@@ -373,10 +373,14 @@ def _starts(problem: Problem, n: int, rng: np.random.Generator) -> list[np.ndarr
 
 
 #: a least-squares start stops once the Gauss–Newton decrement is at most this (½ χ² units): near enough its
-#: optimum to rank the starts, after which only the best is refined to the full tolerance. On bench_scale's
-#: seed-18 data (4 and 24 flights) the starts then take 82 and 114 Jacobians in all instead of 109 and 159,
-#: and the refined optimum moves by < 10⁻⁴ sd
+#: optimum to rank the starts, after which only the best is refined (:func:`refine_least_squares`)
 START_DECREMENT = 0.1
+#: each round of :func:`refine_least_squares` stops once the Gauss–Newton decrement is at most this (or on the
+#: tight step and cost tolerances, 10⁻¹²). Without it the rounds spent most of their Jacobians on digits: on
+#: bench_scale's 12-flight data of seed 19, 58 and 23 Jacobians, the cost settled to 10⁻⁴ after ~20; with
+#: it 35 and 2, the optimum within 0.011 sd of the fully converged one and the cost within 1.1·10⁻⁴ (a
+#: tenth of the profile fits' deviance tolerance); at 24 flights of seeds 18 and 19, 0.004 and 0.006 sd
+REFINE_DECREMENT = 1e-5
 
 
 def fit_least_squares(problem: Problem, starts: int = 4, max_nfev: int = 200, seed: int = 0,
@@ -428,8 +432,9 @@ def fit_least_squares(problem: Problem, starts: int = 4, max_nfev: int = 200, se
 
 def refine_least_squares(problem: Problem, x0: np.ndarray, max_nfev: int = 200, rounds: int = 2,
                          free: np.ndarray | None = None, mu0: float = MU_FAR) -> LeastSquaresResult:
-    """From x0: estimate each flight's σ from its residuals and refit (``rounds`` times), then the
-    Gauss–Newton covariance at the optimum.
+    """From x0: estimate each flight's σ from its residuals and refit (``rounds`` times, each until the
+    Gauss–Newton decrement is at most :data:`REFINE_DECREMENT`), then the Gauss–Newton covariance at the
+    optimum.
 
     Parameters
     ----------
@@ -453,7 +458,8 @@ def refine_least_squares(problem: Problem, x0: np.ndarray, max_nfev: int = 200, 
     x, nfev, res = np.asarray(x0, float).copy(), 0, None
     free = np.ones(x.size, bool) if free is None else np.asarray(free, bool)
     for _ in range(rounds):
-        res = minimise(problem, x, _rms(problem, x), free=free, max_nfev=max_nfev, xtol=1e-12, ftol=1e-12, mu0=mu0)
+        res = minimise(problem, x, _rms(problem, x), free=free, max_nfev=max_nfev, xtol=1e-12, ftol=1e-12, mu0=mu0,
+                       dtol=REFINE_DECREMENT)
         x, nfev = res.x, nfev + res.nfev
     sigma = _rms(problem, x)
     J = jacobian_blocks(x, problem, sigma, free)
