@@ -226,7 +226,7 @@ MU_FAR = 1e-3
 #: noise scales). The scaled information matrix has eigenvalues down to 2·10⁻⁶ along the ridges of the
 #: synthetic benchmark (4 and 24 flights), so μ₀ = 10⁻³ damps the first steps along them ~500-fold, and μ
 #: takes several Jacobians to fall below them (Nielsen's rule: at most ×1/3 per step). Profile fits took 4.2
-#: and 6.9 Jacobians each at 4 and 24 flights with 10⁻³, 3.0 and 3.1 with 10⁻⁶, and ended closer to the
+#: and 6.6 Jacobians each at 4 and 24 flights with 10⁻³, 3.0 and 3.1 with 10⁻⁶, and ended closer to the
 #: constrained optimum (``benchmarks/bench_profile_fits.py``).
 MU_NEAR = 1e-6
 

@@ -205,7 +205,7 @@ def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, cov0: np.nda
     lowers the deviance 2 Δcost by less than :data:`DEVIANCE_TOL` (``cost0``: the optimum's cost, which turns
     it into the minimiser's relative tolerance). Both starts are next to the constrained optimum, so the fit
     starts with little damping ``mu0`` (:data:`.leastsq.MU_NEAR`: 3.0–3.1 Jacobians per fit at 4–24 flights,
-    against 4.2–6.9 with :data:`.leastsq.MU_FAR`)."""
+    against 4.2–6.6 with :data:`.leastsq.MU_FAR`)."""
     free = np.ones(x0.size, bool)
     free[index] = False
     held = x0.copy()
