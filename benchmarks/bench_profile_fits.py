@@ -1,15 +1,20 @@
-"""Benchmark of the profile-likelihood fits' initial damping (issue 18): Jacobians per fit, time of the
-profile stage and the fits' accuracy, with Levenberg–Marquardt started at the far-start damping
-(``leastsq.MU_FAR``, 10⁻³, used for every fit before stop 39) and at the near-start one (``MU_NEAR``,
-10⁻⁶, now the default of profile fits), on ``bench_scale.py``'s synthetic data sets.
+"""Benchmark of the profile-likelihood fits (issue 18): Jacobians per point, time of the profile stage and
+the fits' accuracy, for three settings of the fits, on ``bench_scale.py``'s synthetic data sets:
+
+* ``far, cost stop``: Levenberg–Marquardt started at the far-start damping (``leastsq.MU_FAR``, 10⁻³), stopped
+  when a step lowers the deviance by less than ``profile.DEVIANCE_TOL``, the point's covariance from one more
+  Jacobian (every fit before stop 39);
+* ``near, cost stop``: the same from the near-start damping (``MU_NEAR``, 10⁻⁶: stop 39);
+* ``near, decrement stop``: also stopped once the Gauss–Newton decrement is at most
+  ``profile.DECREMENT_TOL``, the covariance from the fit's last Jacobian (stop 40: the default).
 
 For each flight count: the data set, least squares, then the profile paths of the ten coefficients in one
-process, once per damping, in alternating order over ``--repeats`` rounds (times: medians). Printed per
-damping: profile points, fits, Jacobians per fit, the stage's time, and the deviance error of every point
-that is ``ok`` — its deviance minus that of a tight refit from it (xtol = ftol = 10⁻¹³), which is ≥ 0: how
-far short of the constrained optimum the fit stopped. The smallest eigenvalues of the scale-free
-information matrix at the optimum say which ridge directions a damping of μ₀ relative to the diagonal
-holds back.
+process, once per setting, in rotating order over ``--repeats`` rounds (times: medians). Printed per
+setting: profile points, fits, Jacobians per fit and per point (the fit's and the covariance's), the
+stage's time, and the deviance error of every point that is ``ok`` — its deviance minus that of a tight
+refit from it (xtol = ftol = 10⁻¹³), which is ≥ 0: how far short of the constrained optimum the fit
+stopped. The smallest eigenvalues of the scale-free information matrix at the optimum say which ridge
+directions a damping of μ₀ relative to the diagonal holds back.
 
     python benchmarks/bench_profile_fits.py [--flights 4 24] [--seed 18] [--repeats 1]
 """
@@ -35,16 +40,27 @@ from bayes_disc.inference.data import build_problem  # noqa: E402
 
 
 class _Counted:
-    """``leastsq.minimise`` counting its fits and Jacobians (put in place of profile.minimise)."""
+    """``leastsq.minimise`` counting its fits and Jacobians (put in place of profile.minimise), and
+    ``leastsq.jacobian_blocks`` counting the covariance Jacobians the profile computes itself (in place of
+    profile.jacobian_blocks)."""
 
     def __init__(self):
-        self.fits = self.jacobians = 0
+        self.fits = self.jacobians = self.extra = 0
 
     def __call__(self, *args, **kwargs):
         res = leastsq.minimise(*args, **kwargs)
         self.fits += 1
         self.jacobians += res.njev
         return res
+
+    def jacobian_blocks(self, *args, **kwargs):
+        self.extra += 1
+        return leastsq.jacobian_blocks(*args, **kwargs)
+
+
+SETTINGS = {"far, cost stop": dict(mu0=leastsq.MU_FAR, dtol=0.0),
+            "near, cost stop": dict(mu0=leastsq.MU_NEAR, dtol=0.0),
+            "near, decrement stop": dict(mu0=leastsq.MU_NEAR, dtol=profile.DECREMENT_TOL)}
 
 
 def deviance_errors(problem, ls, paths, cost0: float) -> np.ndarray:
@@ -75,29 +91,29 @@ def one_case(n: int, seed: int, repeats: int, tmp: Path) -> None:
     print(f"{n} flights ({problem.dim} parameters): smallest eigenvalues of the scale-free information "
           f"{', '.join(f'{e:.2g}' for e in ev)}", flush=True)
     indices = range(problem.n_coef + problem.n_ext)
-    dampings = {"MU_FAR": leastsq.MU_FAR, "MU_NEAR": leastsq.MU_NEAR}
-    times = {k: [] for k in dampings}
+    names = list(SETTINGS)
+    times = {k: [] for k in names}
     result = {}
     for r in range(repeats):
-        for name in (list(dampings) if r % 2 == 0 else list(dampings)[::-1]):
+        for name in names[r % len(names):] + names[: r % len(names)]:
             counted = _Counted()
-            profile.minimise = counted
+            profile.minimise, profile.jacobian_blocks = counted, counted.jacobian_blocks
             try:
                 t0 = time.perf_counter()
                 paths = profile.profile_paths(problem, ls.theta, ls.sigma, ls.cov, indices, processes=1,
-                                              mu0=dampings[name])
+                                              **SETTINGS[name])
                 times[name].append(time.perf_counter() - t0)
             finally:
-                profile.minimise = leastsq.minimise
+                profile.minimise, profile.jacobian_blocks = leastsq.minimise, leastsq.jacobian_blocks
             result[name] = (paths, counted)
     for name, (paths, counted) in result.items():
         err = deviance_errors(problem, ls, paths, cost0)
         points = sum(len(p.points) - 1 for p in paths)
-        print(f"  μ₀ = {name} ({dampings[name]:g}): {points} points, {counted.fits} fits, "
-              f"{counted.jacobians / counted.fits:.2f} Jacobians per fit, profiles {np.median(times[name]):.1f} s "
-              f"(median of {len(times[name])}); deviance short of the constrained optimum: median "
-              f"{np.median(err):.1e}, 90 % {np.percentile(err, 90):.1e}, max {err.max():.1e} ({err.size} points)",
-              flush=True)
+        print(f"  {name}: {points} points, {counted.fits} fits, {counted.jacobians / counted.fits:.2f} Jacobians "
+              f"per fit, {(counted.jacobians + counted.extra) / max(points, 1):.2f} per point, profiles "
+              f"{np.median(times[name]):.1f} s (median of {len(times[name])}); deviance short of the constrained "
+              f"optimum: median {np.median(err):.1e}, 90 % {np.percentile(err, 90):.1e}, max {err.max():.1e} "
+              f"({err.size} points)", flush=True)
 
 
 def main(argv=None) -> int:

@@ -92,6 +92,29 @@ def test_block_jacobian_is_the_dense_one(small_problem):
     assert np.all(dense[:n_data][:, ~free] == 0.0)
 
 
+def test_selected_columns_are_the_jacobian_over_the_free_parameters(small_problem):
+    """A Jacobian over every parameter restricted to the free ones (``ArrowJacobian.select``, what a profile
+    fit solves with) is the Jacobian computed over the free ones alone: the same blocks, numbering and prior."""
+    p = small_problem
+    x = p.start_vector()
+    sigma = p.nominal_noise
+    free = np.ones(p.dim, bool)
+    free[[2, p.ic_start + 4, p.dim - 1]] = False
+    own = jacobian_blocks(x, p, sigma, free)
+    chosen = jacobian_blocks(x, p, sigma).select(free)
+    np.testing.assert_array_equal(chosen.shared, own.shared)
+    for a, b in zip(chosen.own, own.own):
+        np.testing.assert_array_equal(a, b)
+    for a, b in zip(chosen.blocks, own.blocks):
+        np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(chosen.prior, own.prior)
+    # and on a random arrow with scattered unknowns: the dense Jacobian's free columns
+    J = _random_jacobian(np.random.default_rng(5))
+    keep = np.random.default_rng(6).uniform(size=J.n) < 0.7
+    np.testing.assert_array_equal(J.select(keep).dense()[: -keep.sum()], J.dense()[: -J.n][:, keep])
+    np.testing.assert_array_equal(J.select(keep).prior, J.prior[keep])
+
+
 def test_new_solver_matches_the_dense_optimum_and_covariance(small_problem):
     """Levenberg–Marquardt on the arrow and scipy's dense trust-region reflective fit reach the same optimum
     (within a small fraction of each parameter's sd) and the same Gauss–Newton covariance."""
@@ -134,8 +157,10 @@ def test_profile_fits_started_near_the_optimum_reach_it(small_problem):
     for index in (1, 7):                                   # CLa and CMq
         for t in (1.0, -3.0):
             value = best.x[index] + t * np.sqrt(cov[index, index])
-            x, cost, ok = profile._fixed_fit(p, sigma, best.x, cov, index, value, 40, best.cost)
+            x, cost, ok, J = profile._fixed_fit(p, sigma, best.x, cov, index, value, 40, best.cost)
             assert ok and x[index] == value
+            # the Jacobian it hands back (the fit's own when it stopped on the decrement) is the point's
+            np.testing.assert_allclose(J.dense(), jacobian_blocks(x, p, sigma).dense(), rtol=0, atol=1e-12)
             free = np.ones(p.dim, bool)
             free[index] = False
             tight = minimise(p, x, sigma, free=free, max_nfev=200, xtol=1e-13, ftol=1e-13)

@@ -225,6 +225,51 @@ class ArrowJacobian:
             C.append(Jk.T @ Jk + np.diag(self.prior[o] ** 2))
         return ArrowMatrix(self.shared, tuple(self.own), A, tuple(B), tuple(C))
 
+    def select(self, keep: np.ndarray) -> "ArrowJacobian":
+        """The Jacobian over the unknowns ``keep`` only: their columns, renumbered in their order.
+
+        Parameters
+        ----------
+        keep : (n,) bool array
+            Unknowns kept.
+
+        Returns
+        -------
+        ArrowJacobian
+            Over ``keep.sum()`` unknowns; every block keeps its rows.
+        """
+        keep = np.asarray(keep, bool)
+        position = np.cumsum(keep) - 1
+        in_shared = keep[self.shared]
+        own, blocks = [], []
+        for o, J in zip(self.own, self.blocks):
+            own.append(position[o[keep[o]]])
+            blocks.append(np.ascontiguousarray(J[:, np.r_[in_shared, keep[o]]]))
+        return ArrowJacobian(shared=position[self.shared[in_shared]], own=tuple(own), blocks=tuple(blocks),
+                             prior=self.prior[keep])
+
+    def block_schur(self) -> list[np.ndarray]:
+        """Per block k, its information about the shared unknowns with its own marginalised,
+
+            S_k = J_ksᵀ J_ks − B_k C_k⁻¹ B_kᵀ,   B_k = J_ksᵀ J_kk,   C_k = J_kkᵀ J_kk + P_k²
+
+        (s × s each; C_k pseudo-inverted in scale-free form): what flight k alone says about the shared
+        parameters, its own initial conditions unknown. Σ_k S_k + P_s² is :meth:`ArrowMatrix.schur`.
+
+        Returns
+        -------
+        list of (s, s) arrays
+        """
+        s = self.shared.size
+        out = []
+        for o, J in zip(self.own, self.blocks):
+            Js, Jk = J[:, :s], J[:, s:]
+            C = Jk.T @ Jk + np.diag(self.prior[o] ** 2)
+            d = np.sqrt(np.where(np.diag(C) > 0, np.diag(C), 1.0))
+            B = Js.T @ Jk
+            out.append(Js.T @ Js - (B / d) @ _pinv_sym(C / np.outer(d, d)) @ (B / d).T)
+        return out
+
     def gradient(self, residuals, prior_residual: np.ndarray) -> np.ndarray:
         """Jᵀ r for the blocks' residuals (tuple of (n_k,)) and the prior rows' residuals (n,)."""
         s = self.shared.size

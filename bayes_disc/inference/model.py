@@ -227,6 +227,17 @@ class Problem:
                        term_start=self.term_start, settings=self.settings, rates=[self.rates[k]],
                        kernel_terms=self.kernel_terms, observations=observations, own_start=own)
 
+    def select_flights(self, ks) -> "Problem":
+        """The problem of flights ``ks`` (indices, in that order) alone, with the same model, settings,
+        integration rates and observation models (θ entries map by name: :meth:`.layout.ParameterLayout.transfer`)."""
+        ks = [int(k) for k in ks]
+        return Problem(flights=[self.flights[k] for k in ks], marker_body=self.marker_body, disc=self.disc, env=self.env,
+                       prior_name=self.prior_name, terms=self.terms, explanations=self.explanations,
+                       start_states=[self.start_states[k] for k in ks], term_start=self.term_start,
+                       settings=self.settings, rates=[self.rates[k] for k in ks], kernel_terms=self.kernel_terms,
+                       observations=[self.channels[k] for k in ks],
+                       own_start=None if not self.own_start else [self.own_start[k] for k in ks])
+
     def with_marker_data(self, flights: dict) -> "Problem":
         """The same problem with some flights' marker recordings replaced ({name: FlightObservation} on the
         same sample grid, e.g. cleaned of outliers): same parameters, starts and noise settings."""

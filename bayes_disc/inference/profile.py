@@ -49,6 +49,12 @@ MARGINAL_RISE = 1.0
 #: a profile fit stops when a step lowers the deviance by less than this (the deviances are read to ~0.01; the
 #: relative tolerance of a full fit would spend the evaluation budget on digits no verdict uses)
 DEVIANCE_TOL = 1e-3
+#: a profile fit also stops once the Gauss–Newton decrement ½ gᵀH⁻¹g is at most this (cost units), on the point
+#: whose Jacobian it has just computed, which then gives the point's covariance. The decrement is the quadratic
+#: model's one-step gain and falls short of what a slow ridge still holds: with ½ DEVIANCE_TOL, 10 % of the points
+#: of the 24-flight benchmark ended over DEVIANCE_TOL short of a tight refit (max 1.8·10⁻³); with ¼ of it, max
+#: 9.2·10⁻⁴ and 3.5 Jacobians per point instead of 4.1 (``benchmarks/bench_profile_fits.py``)
+DECREMENT_TOL = 0.25 * DEVIANCE_TOL
 #: a point whose deviance exceeds this multiple of the stopping deviance is a failed fit or a cliff: it
 #: still bounds the profile but is not ``ok`` (not used as a posterior approximation)
 FAILED_DEVIANCE_FACTOR = 4.0
@@ -197,15 +203,20 @@ def conditional_start(x: np.ndarray, cov: np.ndarray, index: int, value: float) 
 
 
 def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, cov0: np.ndarray, index: int, value: float,
-               max_nfev: int, cost0: float, mu0: float = MU_NEAR):
-    """Optimum of every parameter but ``index`` (held at ``value``): (θ*, cost, converged). It starts from the
-    better (lower cost) of x0 with θ_i set to ``value`` and :func:`conditional_start` (x0, cov0): on the
-    24-flight benchmark the latter halves the Jacobians per fit (7.2 → 3.6 at 4 flights, 8.4 → 5.1 at 24)
-    and the former guards a curved ridge where the linear prediction overshoots. The fit stops when a step
-    lowers the deviance 2 Δcost by less than :data:`DEVIANCE_TOL` (``cost0``: the optimum's cost, which turns
-    it into the minimiser's relative tolerance). Both starts are next to the constrained optimum, so the fit
-    starts with little damping ``mu0`` (:data:`.leastsq.MU_NEAR`: 3.0–3.1 Jacobians per fit at 4–24 flights,
-    against 4.2–6.6 with :data:`.leastsq.MU_FAR`)."""
+               max_nfev: int, cost0: float, mu0: float = MU_NEAR, dtol: float = DECREMENT_TOL):
+    """Optimum of every parameter but ``index`` (held at ``value``): (θ*, cost, converged, J), J the whitened
+    Jacobian over every parameter at θ* (:class:`.arrow.ArrowJacobian`, for the point's covariance).
+
+    The fit starts from the better (lower cost) of x0 with θ_i set to ``value`` and :func:`conditional_start`
+    (x0, cov0): on the 24-flight benchmark the latter halves the Jacobians per fit (7.2 → 3.6 at 4 flights,
+    8.4 → 5.1 at 24) and the former guards a curved ridge where the linear prediction overshoots. Both starts
+    are next to the constrained optimum, so the fit starts with little damping ``mu0``
+    (:data:`.leastsq.MU_NEAR`: 3.0–3.1 Jacobians per fit at 4–24 flights, against 4.2–6.6 with
+    :data:`.leastsq.MU_FAR`). It stops when the Gauss–Newton decrement (the cost decrease its quadratic model
+    still expects) is at most ``dtol`` — the Jacobian there is the point's own, so none is computed twice —
+    or when a step lowers the deviance 2 Δcost by less than :data:`DEVIANCE_TOL` (``cost0``: the optimum's
+    cost, which turns it into the minimiser's relative tolerance); J is then computed at θ*. ``dtol`` = 0:
+    the second rule alone."""
     free = np.ones(x0.size, bool)
     free[index] = False
     held = x0.copy()
@@ -214,14 +225,16 @@ def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, cov0: np.nda
     costs = [0.5 * float(np.sum(np.square(whitened_residuals(z, problem, sigma)))) for z in starts]
     x = starts[int(np.argmin(costs))]
     ftol = 0.5 * DEVIANCE_TOL / max(cost0, 1e-300)
-    res = minimise(problem, x, sigma, free=free, max_nfev=max_nfev, ftol=ftol, mu0=mu0)
-    return res.x, float(res.cost), bool(res.status > 0)
+    res = minimise(problem, x, sigma, free=free, max_nfev=max_nfev, ftol=ftol, mu0=mu0, dtol=dtol,
+                   keep_jacobian=dtol > 0)
+    J = res.jacobian if res.jacobian is not None else jacobian_blocks(res.x, problem, sigma)
+    return res.x, float(res.cost), bool(res.status > 0), J
 
 
 def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov_hat: np.ndarray, index: int,
                  side: float, max_deviance: float = MAX_DEVIANCE, max_points: int = MAX_POINTS,
                  max_nfev: int = 40, extended_points: int = EXTENDED_POINTS,
-                 mu0: float = MU_NEAR) -> list[ProfilePoint]:
+                 mu0: float = MU_NEAR, dtol: float = DECREMENT_TOL) -> list[ProfilePoint]:
     """The points on one side (``side`` = +1: values above θ̂_i, −1: below) of parameter ``index``'s profile
     through the least-squares optimum ``theta_hat`` (noise ``sigma``, covariance ``cov_hat``).
 
@@ -231,7 +244,8 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
     the deviance stays below ``max_deviance``, and past ``max_deviance`` once the Laplace marginal ln g
     (module docstring) has fallen by ``max_deviance``/2 from its highest value on that side, or after
     ``extended_points`` points (:func:`side_done`). The two sides start from θ̂ and do not depend on each
-    other. ``mu0`` is every fit's initial damping (:func:`.leastsq.minimise`).
+    other. ``mu0`` is every fit's initial damping (:func:`.leastsq.minimise`), ``dtol`` its decrement
+    tolerance (:func:`_fixed_fit`).
 
     Returns
     -------
@@ -246,10 +260,10 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
     x, cov, step, best = theta_hat.copy(), cov_hat, sd0, 0.0
     for k in range(max(max_points, extended_points)):
         value = float(x[index] + side * step)
-        x_new, cost, ok = _fixed_fit(problem, sigma, x, cov, index, value, max_nfev, cost0, mu0)
+        x_new, cost, ok, J = _fixed_fit(problem, sigma, x, cov, index, value, max_nfev, cost0, mu0, dtol)
         if not (ok and np.isfinite(cost)):
             break
-        cov = jacobian_blocks(x_new, problem, sigma).information().inverse()
+        cov = J.information().inverse()
         dev = 2.0 * (cost - cost0)
         points.append(ProfilePoint(value=value, theta=x_new, deviance=dev, cov=cov,
                                    t=(value - theta_hat[index]) / sd0,

@@ -33,7 +33,7 @@ from .config import RunConfig
 from ..observation.models import MarkerPositions
 from .data import build_problem
 from .inertial import load_run_throws
-from .leastsq import fit_least_squares, noise_text
+from .leastsq import START_FLIGHTS, fit_least_squares, noise_text
 from .results import build_inference_data, build_summary, format_table, prior_record, writing_posterior
 from .profile import profile_paths
 from .robust import (FLAGGED, JUDGEMENT_AVERAGE, average_over_judgement, gross_error_advice, robust_flights,
@@ -227,17 +227,21 @@ def saved_least_squares(out: Path) -> dict | None:
 
 
 def _least_squares(problem, cfg: RunConfig, out: Path):
-    with stage("least squares", f"{cfg.least_squares.starts} start(s), ≤ {cfg.least_squares.max_nfev} "
+    where = (f" on the {START_FLIGHTS} most informative flights" if problem.n_flights > START_FLIGHTS else "")
+    with stage("least squares", f"{cfg.least_squares.starts} start(s){where}, ≤ {cfg.least_squares.max_nfev} "
                                 "evaluations each") as st:
         def report(done, total, cost):
             if cost is None:
-                logger.info(f"least squares: refining the best start with per-flight noise scales ({st.elapsed:.0f} s)")
+                joined = "joining the other flights to it and " if where else ""
+                logger.info(f"least squares: {joined}refining the best start with per-flight noise scales "
+                            f"({st.elapsed:.0f} s)")
             else:
                 logger.info(f"least squares: start {done}/{total} cost {cost:.1f} ({st.elapsed:.0f} s)")
         ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
                                seed=cfg.sampler.seed, progress=report)
         ls_dict = _save_least_squares(ls, out)
-        st.result = (f"cost {ls.cost:.1f}, condition number {ls.condition_number:.3g}, RMS "
+        st.result = ((f"starts on {', '.join(ls.start_flights)}; " if ls.start_flights else "")
+                     + f"cost {ls.cost:.1f}, condition number {ls.condition_number:.3g}, RMS "
                      + noise_text(ls_dict["noise"]))
     return ls, ls_dict
 
