@@ -371,8 +371,9 @@ def step_length(cost: float, trial_cost: float, slope: float) -> float | None:
 
         f(α) = f(0) + α f'(0) + α² c,   c = f(1) − f(0) − f'(0),   α* = −f'(0) / (2c),
 
-    with f(0) = ``cost``, f(1) = ``trial_cost`` and f'(0) = gᵀδ = ``slope``; None where the parabola has no
-    minimum or α* is within :data:`STEP_LENGTH_TRIGGER` of 1 (the step is fine as it is).
+    with f(0) = ``cost``, f(1) = ``trial_cost`` and f'(0) = gᵀδ = ``slope``; None for a step that is not a
+    descent direction or where α* is within :data:`STEP_LENGTH_TRIGGER` of 1 (the step is fine as it is); the
+    upper bound where c ≤ 0 (the cost falls at least linearly along the step).
 
     Gauss–Newton drops the curvature Σ r_i ∇²r_i. Where that is large along the ridges of a joint fit, the full
     step lands far from the minimum along its own line: on bench_scale's 24-flight data of seed 19, the
@@ -490,6 +491,11 @@ def informative_flights(J: ArrowJacobian, n: int) -> list[int]:
     return sorted(chosen)
 
 
+def _start_noise(problem: Problem, sigma0: float | None) -> np.ndarray:
+    """Noise scale per group during the starts: ``sigma0`` for every group, or each model's nominal noise."""
+    return problem.nominal_noise if sigma0 is None else np.full(problem.n_groups, sigma0)
+
+
 def _log_det(M: np.ndarray) -> float:
     """ln det of a symmetric positive-definite matrix in scale-free form (−∞ if not positive definite)."""
     d = np.sqrt(np.where(np.diag(M) > 0, np.diag(M), 1.0))
@@ -504,9 +510,9 @@ def join_flights(problem: Problem, part: Problem, x_part: np.ndarray, sigma0: fl
     simulations per step), then all together from there (little damping, :data:`MU_NEAR`, and step-length
     corrections: the start is next to the optimum), each to :data:`START_DECREMENT`.
 
-    On bench_scale's 24-flight data of seed 19 (starts on 4 flights), the joint fit then took 4 Jacobians and
-    reached the optimum of four starts on all 24 flights to 0.001 sd; least squares in all took 1196
-    flight-Jacobians instead of 4104.
+    On bench_scale's 24-flight data of seed 19 (starts on 4 flights), each other flight's fit took 3–7
+    Jacobians of that flight, the joint fit 4, and least squares in all (:func:`fit_least_squares`) reached the
+    optimum of four starts on all 24 flights to 0.0005 sd with 1228 flight-Jacobians instead of 4128.
 
     Parameters
     ----------
@@ -535,13 +541,12 @@ def join_flights(problem: Problem, part: Problem, x_part: np.ndarray, sigma0: fl
         one = problem.subset(k)
         free = np.zeros(one.dim, bool)
         free[one.layout.flight_slice(0)] = True
-        sigma = one.nominal_noise if sigma0 is None else np.full(one.n_groups, sigma0)
-        res = minimise(one, one.layout.transfer(x, problem.layout, one.start_vector()), sigma, free=free,
-                       max_nfev=max_nfev, dtol=START_DECREMENT)
+        res = minimise(one, one.layout.transfer(x, problem.layout, one.start_vector()), _start_noise(one, sigma0),
+                       free=free, max_nfev=max_nfev, dtol=START_DECREMENT)
         x = problem.layout.transfer(res.x, one.layout, x)
         nfev += res.nfev
-    sigma = problem.nominal_noise if sigma0 is None else np.full(problem.n_groups, sigma0)
-    joint = minimise(problem, x, sigma, max_nfev=max_nfev, mu0=MU_NEAR, dtol=START_DECREMENT, line_search=True)
+    joint = minimise(problem, x, _start_noise(problem, sigma0), max_nfev=max_nfev, mu0=MU_NEAR, dtol=START_DECREMENT,
+                     line_search=True)
     joint.nfev += nfev
     return joint
 
@@ -583,10 +588,10 @@ def fit_least_squares(problem: Problem, starts: int = 4, max_nfev: int = 200, se
     rng = np.random.default_rng(seed)
     part, chosen = problem, []
     if problem.n_flights > START_FLIGHTS:
-        sigma = problem.nominal_noise if sigma0 is None else np.full(problem.n_groups, sigma0)
-        chosen = informative_flights(jacobian_blocks(problem.start_vector(), problem, sigma), START_FLIGHTS)
+        J = jacobian_blocks(problem.start_vector(), problem, _start_noise(problem, sigma0))
+        chosen = informative_flights(J, START_FLIGHTS)
         part = problem.select_flights(chosen)
-    sigma = part.nominal_noise if sigma0 is None else np.full(part.n_groups, sigma0)
+    sigma = _start_noise(part, sigma0)
     results = []
     x0s = _starts(part, starts, rng)
     for i, x0 in enumerate(x0s):

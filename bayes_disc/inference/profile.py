@@ -215,8 +215,8 @@ def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, cov0: np.nda
     :data:`.leastsq.MU_FAR`). It stops when the Gauss–Newton decrement (the cost decrease its quadratic model
     still expects) is at most ``dtol`` — the Jacobian there is the point's own, so none is computed twice —
     or when a step lowers the deviance 2 Δcost by less than :data:`DEVIANCE_TOL` (``cost0``: the optimum's
-    cost, which turns it into the minimiser's relative tolerance); J is then computed at θ*. ``dtol`` = 0:
-    the second rule alone."""
+    cost, which turns it into the minimiser's relative tolerance); J is then computed at θ* (None after a
+    failed fit). ``dtol`` = 0: the second rule alone."""
     free = np.ones(x0.size, bool)
     free[index] = False
     held = x0.copy()
@@ -227,8 +227,9 @@ def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, cov0: np.nda
     ftol = 0.5 * DEVIANCE_TOL / max(cost0, 1e-300)
     res = minimise(problem, x, sigma, free=free, max_nfev=max_nfev, ftol=ftol, mu0=mu0, dtol=dtol,
                    keep_jacobian=dtol > 0)
-    J = res.jacobian if res.jacobian is not None else jacobian_blocks(res.x, problem, sigma)
-    return res.x, float(res.cost), bool(res.status > 0), J
+    ok = res.status > 0
+    J = res.jacobian if res.jacobian is not None or not ok else jacobian_blocks(res.x, problem, sigma)
+    return res.x, float(res.cost), ok, J
 
 
 def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov_hat: np.ndarray, index: int,
