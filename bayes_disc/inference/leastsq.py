@@ -341,7 +341,7 @@ def minimise(problem: Problem, x0: np.ndarray, sigma: np.ndarray, free: np.ndarr
             if np.isfinite(o_cost) and o_cost < min(t_cost, cost):
                 trial, t_parts, t_prior, t_cost = other, o_parts, o_prior, o_cost
                 rho = max(rho, RHO_FLOOR)      # μ still follows the full step's gain ratio
-        if np.isfinite(t_cost) and rho > 0 and t_cost < cost:
+        if np.isfinite(t_cost) and rho > 0:
             small = cost - t_cost <= ftol * cost and rho > 0.25
             x, parts, prior, cost = trial, t_parts, t_prior, t_cost
             mu, nu, J = mu * max(1 / 3, 1 - (2 * rho - 1) ** 3), 2.0, None

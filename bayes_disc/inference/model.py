@@ -216,12 +216,12 @@ class Problem:
         """The problem of flight k alone (optionally with its recording replaced, e.g. a window), with the
         same model, settings and integration rate; a replaced recording keeps the marker model's noise
         settings and drops the flight's other channels)."""
-        observations, own = [self.channels[k]], None if not self.own_start else [self.own_start[k]]
-        if flight is not None:
-            marker = next((c for c in self.channels[k] if isinstance(c, MarkerPositions)), None)
-            observations = None if marker is None else [(marker.for_data(flight),)]
-            own = None if marker is None or not self.own_start else [self.own_start[k][: len(marker.parameters)]]
-        return Problem(flights=[self.flights[k] if flight is None else flight], marker_body=self.marker_body,
+        if flight is None:
+            return self.select_flights([k])
+        marker = next((c for c in self.channels[k] if isinstance(c, MarkerPositions)), None)
+        observations = None if marker is None else [(marker.for_data(flight),)]
+        own = None if marker is None or not self.own_start else [self.own_start[k][: len(marker.parameters)]]
+        return Problem(flights=[flight], marker_body=self.marker_body,
                        disc=self.disc, env=self.env, prior_name=self.prior_name, terms=self.terms,
                        explanations=self.explanations, start_states=[self.start_states[k]],
                        term_start=self.term_start, settings=self.settings, rates=[self.rates[k]],
