@@ -34,6 +34,7 @@ class LeastSquaresResult:
     sigma_names: list            # (n_groups,) public name of every noise group's σ (``sigma_<flight>`` for markers)
     sigma_units: list            # (n_groups,) its unit ("m", "rad/s", "m/s²")
     start_flights: list = field(default_factory=list)   # flights the starts were fitted on (empty: all of them)
+    lower_optima: list = field(default_factory=list)    # profile points below an earlier optimum it was refitted from
 
     def noise(self) -> dict:
         """{sigma name: {"value", "unit"}}: every noise group's residual RMS at the optimum."""
@@ -49,6 +50,7 @@ class LeastSquaresResult:
         return {
             "cost": self.cost, "condition_number": self.condition_number, "nfev": self.nfev,
             "message": self.message, "start_costs": self.start_costs, "start_flights": self.start_flights,
+            "lower_optima": self.lower_optima,
             "rms_mm": self.marker_rms_mm(), "noise": self.noise(),
             "parameters": {n: {"value": float(v), "sd": float(s)} for n, v, s in zip(self.names, self.theta, sd)},
         }
@@ -658,6 +660,38 @@ def refine_least_squares(problem: Problem, x0: np.ndarray, max_nfev: int = 200, 
                               start_costs=[], nfev=int(nfev), message=res.message if res else "",
                               names=problem.names, flight_names=[f.name for f in problem.flights],
                               sigma_names=list(problem.sigma_names), sigma_units=list(problem.noise_units))
+
+
+def refit_from_lower(problem: Problem, ls: LeastSquaresResult, x: np.ndarray, found: dict,
+                     max_nfev: int = 200) -> LeastSquaresResult:
+    """The least squares refitted from x, a point of lower cost than ``ls``'s optimum (a profile point,
+    :class:`.profile.LowerOptimum`): ``ls`` was a local optimum that every start ended in.
+
+    Parameters
+    ----------
+    problem : Problem
+    ls : LeastSquaresResult
+        The optimum found before.
+    x : (dim,) array
+        The lower point (every parameter).
+    found : dict
+        What found it (``profile``, ``t``, ``deviance``), recorded in ``lower_optima`` with ``earlier_cost``:
+        the earlier optimum's cost with the new noise scales, to compare with the new ``cost``.
+    max_nfev : int
+        Evaluation budget of each refinement round.
+
+    Returns
+    -------
+    LeastSquaresResult
+        Refined from x (:func:`refine_least_squares`, next to an optimum); the starts' record, the evaluations
+        and the earlier ``lower_optima`` carried over.
+    """
+    out = refine_least_squares(problem, x, max_nfev=max_nfev, mu0=MU_NEAR, line_search=True)
+    out.start_costs, out.start_flights, out.nfev = ls.start_costs, ls.start_flights, out.nfev + ls.nfev
+    earlier = 0.5 * float(np.sum(np.square(whitened_residuals(ls.theta, problem, out.sigma))))
+    out.lower_optima = [*ls.lower_optima, {**found, "earlier_cost": earlier}]
+    check_fit_plausible(out, problem)
+    return out
 
 
 def _scaled_information(J: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -25,6 +25,10 @@ and 5 % of its mass beyond the end of a path that stopped at D = 18). A side the
 the marginal's mass. The same holds where the profile stays flat but ln g rises (the valley widens faster
 than the deviance grows): a flat side goes on past :data:`MAX_POINTS` once ln g has risen by more than
 :data:`MARGINAL_RISE` along it, until it has fallen by ``max_deviance``/2 from its best.
+
+A path that reaches a lower cost than θ̂ (deviance below −:data:`LOWER_OPTIMUM_DEVIANCE`) shows θ̂ to be a local
+optimum; :func:`profile_paths` can then stop (:class:`LowerOptimum`) so that the least squares are refitted from
+that point and the paths start again (:func:`.run.posterior_approximation`).
 """
 from __future__ import annotations
 
@@ -58,6 +62,33 @@ DECREMENT_TOL = 0.25 * DEVIANCE_TOL
 #: a point whose deviance exceeds this multiple of the stopping deviance is a failed fit or a cliff: it
 #: still bounds the profile but is not ``ok`` (not used as a posterior approximation)
 FAILED_DEVIANCE_FACTOR = 4.0
+#: a point whose deviance is below −LOWER_OPTIMUM_DEVIANCE has a lower cost than the least-squares optimum the
+#: paths start from (the profile fits are accurate to ~10⁻³, the optimum's refinement to 10⁻⁵): that optimum
+#: was a local one, and the side stops there (:class:`LowerOptimum`). On seed 19's 12 flights of
+#: ``benchmarks/bench_scale.py`` the least squares ended in a mode 2.0 deviance units above another (CM0, CMa,
+#: CMq 2.9, 2.1, 3.0 Laplace sds away; the straight line between the two crosses a barrier of D ≈ 360), which
+#: the profiles of CM0 (D = −0.62 at t = −1.8) and CMa (D = −1.95 at t = +1.8) reach along the ridge. From the
+#: local optimum five profile fits crawled to their budget toward it, 673 Jacobians in all; from the lower
+#: one, 366 and none at its budget
+LOWER_OPTIMUM_DEVIANCE = 0.1
+
+
+class LowerOptimum(Exception):
+    """A profile fit found a point below the least-squares optimum the paths started from
+    (:func:`profile_paths` with ``stop_on_lower``): the least squares should be refitted from ``point.theta``.
+
+    Attributes
+    ----------
+    name : str
+        The profiled parameter.
+    point : ProfilePoint
+        The lowest point of that side (deviance < −:data:`LOWER_OPTIMUM_DEVIANCE`).
+    """
+
+    def __init__(self, name: str, point: "ProfilePoint"):
+        super().__init__(f"the profile of {name} found a lower cost than the least-squares optimum "
+                         f"(deviance {point.deviance:.2f} at t = {point.t:+.2f})")
+        self.name, self.point = name, point
 
 
 @dataclass
@@ -244,7 +275,8 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
     when a fit fails, past ``FAILED_DEVIANCE_FACTOR`` · ``max_deviance``, after ``max_points`` points while
     the deviance stays below ``max_deviance``, and past ``max_deviance`` once the Laplace marginal ln g
     (module docstring) has fallen by ``max_deviance``/2 from its highest value on that side, or after
-    ``extended_points`` points (:func:`side_done`). The two sides start from θ̂ and do not depend on each
+    ``extended_points`` points (:func:`side_done`); and at a point below the optimum (deviance
+    < −:data:`LOWER_OPTIMUM_DEVIANCE`: θ̂ was a local optimum). The two sides start from θ̂ and do not depend on each
     other. ``mu0`` is every fit's initial damping (:func:`.leastsq.minimise`), ``dtol`` its decrement
     tolerance (:func:`_fixed_fit`).
 
@@ -271,7 +303,8 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
                                    ok=dev <= FAILED_DEVIANCE_FACTOR * max_deviance))
         log_g = -0.5 * dev + conditional_log_volume(cov, index) - volume0
         best = max(best, log_g)
-        if side_done(k + 1, dev, log_g, best, max_deviance, max_points, extended_points):
+        if dev < -LOWER_OPTIMUM_DEVIANCE or side_done(k + 1, dev, log_g, best, max_deviance, max_points,
+                                                       extended_points):
             break
         x, step = x_new, max(float(np.sqrt(cov[index, index])), 0.5 * sd0)
     return points
@@ -306,14 +339,43 @@ def _side_task(task: tuple[int, float]) -> list[ProfilePoint]:
     return profile_side(a["problem"], a["theta"], a["sigma"], a["cov"], task[0], task[1], **a["kwargs"])
 
 
+def lowest_point(points: list[ProfilePoint]) -> ProfilePoint | None:
+    """The lowest point with a deviance below −:data:`LOWER_OPTIMUM_DEVIANCE` (a lower cost than the optimum the
+    path started from), or None."""
+    below = [p for p in points if p.deviance < -LOWER_OPTIMUM_DEVIANCE]
+    return min(below, key=lambda p: p.deviance) if below else None
+
+
+def ridge_first(cov: np.ndarray, indices) -> list[int]:
+    """``indices`` by decreasing variance inflation Σ_ii (Σ⁻¹)_ii (how much the other parameters widen θ_i's
+    Laplace sd; the scale-free correlation matrix inverted): the parameters on the posterior's ridges, whose
+    sides are the longest and slowest (12 points instead of 4–5, and the crawling fits), come first.
+
+    Parameters
+    ----------
+    cov : (dim, dim) array
+        Gauss–Newton covariance at the optimum.
+    indices : iterable of int
+        Parameters to order.
+
+    Returns
+    -------
+    list of int
+    """
+    d = np.sqrt(np.diag(cov))
+    inflation = np.diag(np.linalg.inv(cov / np.outer(d, d)))
+    return sorted(indices, key=lambda i: -inflation[i])
+
+
 def profile_paths(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov_hat: np.ndarray, indices,
-                  processes: int = 1, progress=None, **kwargs) -> list[ProfilePath]:
+                  processes: int = 1, progress=None, stop_on_lower: bool = False, **kwargs) -> list[ProfilePath]:
     """Profiles of several parameters, in ``processes`` forked worker processes (independent fits).
 
     Each side of each path is one task (:func:`profile_side`), so that no worker is left waiting on one long
     path (a side that runs on past the deviance limit, :func:`side_done`, is up to 12 fits). The paths are the
-    same as :func:`profile_path`'s. (On the 24-flight benchmark the paths were already balanced between two
-    workers: 32.4 s by path, 32.8 s by side.)
+    same as :func:`profile_path`'s. The tasks go out ridge parameters first (:func:`ridge_first`): the longest
+    sides start first, so that the workers finish together, and a lower optimum, which the ridges lead to, is
+    found early.
 
     Parameters
     ----------
@@ -330,8 +392,11 @@ def profile_paths(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, co
     processes : int
         Worker processes.
     progress : callable, optional
-        Called as ``progress(path, done, total)`` after each profile is finished, in the order of
-        ``indices``.
+        Called as ``progress(path, done, total)`` after each profile is finished (in the order of
+        :func:`ridge_first`).
+    stop_on_lower : bool
+        Raise :class:`LowerOptimum` at the first side (in that order, so the same side whatever the timing)
+        that reaches a point below the optimum; the workers are stopped.
     **kwargs
         Passed to :func:`profile_side`.
 
@@ -339,22 +404,30 @@ def profile_paths(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, co
     -------
     list of ProfilePath
         One per index, in the order of ``indices``.
+
+    Raises
+    ------
+    LowerOptimum
+        With ``stop_on_lower``: a profile fit found a lower cost than ``theta_hat``'s.
     """
     indices = list(indices)
-    tasks = [(i, side) for i in indices for side in (1.0, -1.0)]
+    tasks = [(i, side) for i in ridge_first(cov_hat, indices) for side in (1.0, -1.0)] if indices else []
     _POOL.update(problem=problem, theta=theta_hat, sigma=sigma, cov=cov_hat, kwargs=kwargs)
-    out: list[ProfilePath] = []
+    out: dict[int, ProfilePath] = {}
 
     def collect(sides) -> list[ProfilePath]:
         done: list[list[ProfilePoint]] = []
-        for side in sides:
+        for (i, _), side in zip(tasks, sides):
+            low = lowest_point(side) if stop_on_lower else None
+            if low is not None:
+                raise LowerOptimum(problem.names[i], low)
             done.append(side)
             if len(done) == 2:
-                out.append(join_sides(problem, theta_hat, cov_hat, indices[len(out)], done))
+                out[i] = join_sides(problem, theta_hat, cov_hat, i, done)
                 done = []
                 if progress is not None:
-                    progress(out[-1], len(out), len(indices))
-        return out
+                    progress(out[i], len(out), len(indices))
+        return [out[i] for i in indices]
 
     try:
         if processes <= 1 or len(indices) == 0:

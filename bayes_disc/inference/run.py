@@ -33,9 +33,9 @@ from .config import RunConfig
 from ..observation.models import MarkerPositions
 from .data import build_problem
 from .inertial import load_run_throws
-from .leastsq import START_FLIGHTS, fit_least_squares, noise_text
+from .leastsq import START_FLIGHTS, fit_least_squares, noise_text, refit_from_lower
 from .results import build_inference_data, build_summary, format_table, prior_record, writing_posterior
-from .profile import profile_paths
+from .profile import LowerOptimum, lowest_point, profile_paths
 from .robust import (FLAGGED, JUDGEMENT_AVERAGE, average_over_judgement, gross_error_advice, robust_flights,
                      robust_refit, suspected_gross_errors, with_saved_flags)
 from .proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
@@ -307,9 +307,19 @@ def _average_over_judgement(raw, problem, chains, cfg: RunConfig, out: Path) -> 
                      "weights not trusted; see ") + str(out / JUDGEMENT_AVERAGE))
 
 
-def posterior_approximation(problem, ls, processes: int, out: Path, progress: bool = False):
+#: least-squares refits from a lower point a profile found (:class:`.profile.LowerOptimum`) before the profiles
+#: are taken as they are
+MAX_LOWER_REFITS = 2
+
+
+def posterior_approximation(problem, ls, processes: int, out: Path, progress: bool = False, max_nfev: int = 200):
     """Profile paths of the coefficients through the least-squares optimum and the ridge-aware
     independence proposal built from them (:func:`.proposals.independence_proposal`).
+
+    A profile that reaches a lower cost than the optimum (:class:`.profile.LowerOptimum`) shows the optimum
+    was a local one: the least squares are refitted from that point (:func:`.leastsq.refit_from_lower`, the
+    least-squares files rewritten) and the profiles start again from the new optimum, at most
+    :data:`MAX_LOWER_REFITS` times.
 
     Parameters
     ----------
@@ -323,28 +333,49 @@ def posterior_approximation(problem, ls, processes: int, out: Path, progress: bo
         Run folder; the paths are written to ``<out>/profiles.json``.
     progress : bool
         A bar over the coefficients (on a terminal); otherwise a log line per finished profile.
+    max_nfev : int
+        Evaluation budget of each least-squares refinement round after a lower point.
 
     Returns
     -------
-    CompositeProposal
+    proposal : CompositeProposal
         The independence proposal for the sampler.
+    ls : LeastSquaresResult
+        The optimum the profiles went through: ``ls`` itself, or its refit from a lower point.
     """
     from tqdm import tqdm
     idx = range(problem.n_coef + problem.n_ext)
     with stage("profile likelihoods", f"{len(idx)} coefficients in {processes} process(es)") as st:
-        bar = tqdm(total=len(idx), desc="profiles", unit="coefficient", leave=False,
-                   disable=None if progress else True)
+        for attempt in range(MAX_LOWER_REFITS + 1):
+            bar = tqdm(total=len(idx), desc="profiles", unit="coefficient", leave=False,
+                       disable=None if progress else True)
 
-        def report(path, done, total):
-            bar.set_postfix_str(path.name, refresh=False)
-            bar.update(1)
-            if bar.disable:
-                logger.info(f"profile likelihood {done}/{total}: {path.name}, {len(path.points)} points, "
-                            f"{path.classify()} ({st.elapsed:.0f} s)")
-        try:
-            paths = profile_paths(problem, ls.theta, ls.sigma, ls.cov, idx, processes=processes, progress=report)
-        finally:
-            bar.close()
+            def report(path, done, total):
+                bar.set_postfix_str(path.name, refresh=False)
+                bar.update(1)
+                if bar.disable:
+                    logger.info(f"profile likelihood {done}/{total}: {path.name}, {len(path.points)} points, "
+                                f"{path.classify()} ({st.elapsed:.0f} s)")
+            try:
+                paths = profile_paths(problem, ls.theta, ls.sigma, ls.cov, idx, processes=processes, progress=report,
+                                      stop_on_lower=attempt < MAX_LOWER_REFITS)
+                break
+            except LowerOptimum as found:
+                logger.warning(f"{found}, which was a local one (cost {ls.cost:.1f}): refitting the least squares "
+                               "from that point, then the profiles again")
+                ls = refit_from_lower(problem, ls, found.point.theta, max_nfev=max_nfev,
+                                      found={"profile": found.name, "t": float(found.point.t),
+                                             "deviance": float(found.point.deviance)})
+                _save_least_squares(ls, out)
+                logger.info(f"least squares refitted: cost {ls.cost:.1f} (the earlier optimum's with the new noise "
+                            f"scales: {ls.lower_optima[-1]['earlier_cost']:.1f}), RMS {noise_text(ls.to_dict()['noise'])}")
+            finally:
+                bar.close()
+        below = [p.name for p in paths if lowest_point(p.points) is not None]
+        if below:
+            logger.warning(f"the profiles of {', '.join(below)} still reach below the least-squares optimum after "
+                           f"{MAX_LOWER_REFITS} refits from lower points: the posterior has several modes close "
+                           "in cost; the sampler starts from all of them")
         proposal = independence_proposal(problem, ls.theta, ls.cov, paths)
         record = {}
         for path in paths:
@@ -354,9 +385,11 @@ def posterior_approximation(problem, ls, processes: int, out: Path, progress: bo
                                  "shape": path.classify()}
         (out / "profiles.json").write_text(json.dumps(record, indent=1))
         ridge = [n for n, r in record.items() if r["departure_from_laplace"] > PROFILE_DEPARTURE]
-        st.result = ((f"non-Gaussian along {', '.join(ridge)}; " if ridge else "all close to Gaussian; ")
+        refits = (f"least squares refitted {len(ls.lower_optima)} time(s) from a lower point on a profile; "
+                  if ls.lower_optima else "")
+        st.result = (refits + (f"non-Gaussian along {', '.join(ridge)}; " if ridge else "all close to Gaussian; ")
                      + f"{len(proposal.parts) - 1} ridge proposal(s)")
-    return proposal
+    return proposal, ls
 
 
 def _resume_message(name: str, steps: list) -> str:
@@ -427,7 +460,9 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
     else:
         ls, ls_dict = _least_squares(problem, cfg, out)
         problem, ls, ls_dict = _robust(problem, ls, ls_dict, cfg, out)
-        proposal = posterior_approximation(problem, ls, cfg.sampler.processes, out, progress=progress)
+        proposal, ls = posterior_approximation(problem, ls, cfg.sampler.processes, out, progress=progress,
+                                               max_nfev=cfg.least_squares.max_nfev)
+        ls_dict = ls.to_dict()
         (out / "chains").mkdir(exist_ok=True)
         (out / "chains" / RUN_KEY).write_text(json.dumps(run_key(cfg, problem), indent=1))
     s = cfg.sampler

@@ -108,6 +108,11 @@ def appendix_section(ctx) -> Section:
     ls = s.get("least_squares") or {}
     ls_rows = [("cost", fmt(ls.get("cost"))), ("condition number", fmt(ls.get("condition_number"), 3)),
                ("residual RMS per noise group", _noise_rms(ls))]
+    for k, low in enumerate(ls.get("lower_optima") or []):
+        ls_rows.append((f"refit {k + 1} from a lower point",
+                        f"the profile of {low['profile']} reached deviance {low['deviance']:.2f} below the earlier "
+                        f"optimum (t = {low['t']:+.2f}); that optimum's cost with the new noise scales: "
+                        f"{fmt(low['earlier_cost'])}"))
     recorded = info.get("versions")
     if isinstance(recorded, dict) and recorded:
         software = ("<h3>Software (recorded by the run)</h3>"

@@ -1,0 +1,97 @@
+"""A least-squares optimum that is not the lowest point: the profiles that reach below it, and the refit from
+there before the profiles start again (bayes_disc.inference.profile.LowerOptimum, leastsq.refit_from_lower,
+run.posterior_approximation)."""
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from bayes_disc.inference import profile
+from bayes_disc.inference.initial import initial_state_from_data
+from bayes_disc.inference.leastsq import minimise, refine_least_squares, whitened_residuals
+from bayes_disc.inference.model import Problem
+from bayes_disc.inference.profile import (LOWER_OPTIMUM_DEVIANCE, LowerOptimum, lowest_point, profile_paths,
+                                          profile_side, ridge_first)
+from bayes_disc.inference.run import posterior_approximation
+from bayes_disc.observation.synth import DEFAULT_MARKERS, LaunchSpec, SynthSpec, synthesize
+
+
+def _cost(x, p, sigma):
+    return 0.5 * float(np.sum(np.square(whitened_residuals(x, p, sigma))))
+
+
+@pytest.fixture(scope="module")
+def displaced():
+    """Two throws; their least-squares optimum, and the same result moved to the optimum with CL0 held 3 sd
+    above it (every other parameter re-optimised): a "local optimum" 9 deviance units above the lowest point,
+    that every profile leaves downhill."""
+    flights = (LaunchSpec(name="a", speed=13.0, launch_angle_deg=3, alpha_deg=6, spin=60, duration=0.8, noise_mm=1.0),
+               LaunchSpec(name="b", speed=11.0, launch_angle_deg=8, alpha_deg=14, spin=55, duration=0.8, noise_mm=1.0))
+    spec = SynthSpec(name="lower", flights=flights, seed=7)
+    data = synthesize(spec)
+    mb = np.array(list(DEFAULT_MARKERS.values()))
+    p = Problem(flights=data.flights, marker_body=mb, disc=spec.disc, env=spec.env, prior_name="potts_crowther",
+                start_states=[initial_state_from_data(f, mb) for f in data.flights])
+    ls = refine_least_squares(p, minimise(p, p.start_vector(), p.nominal_noise, max_nfev=200).x)
+    i = p.names.index("CL0")
+    sd = np.sqrt(ls.cov[i, i])
+    x, _, ok, _ = profile._fixed_fit(p, ls.sigma, ls.theta, ls.cov, i, ls.theta[i] + 3 * sd, 100,
+                                     _cost(ls.theta, p, ls.sigma))
+    assert ok
+    return p, ls, replace(ls, theta=x, cost=_cost(x, p, ls.sigma)), i
+
+
+def test_a_side_stops_at_its_first_point_below_the_optimum(displaced):
+    p, ls, local, i = displaced
+    down = profile_side(p, local.theta, local.sigma, local.cov, i, -1.0)
+    assert len(down) == 1 and down[0].deviance < -LOWER_OPTIMUM_DEVIANCE
+    assert _cost(down[0].theta, p, local.sigma) < local.cost
+    assert lowest_point(down) is down[0]
+    up = profile_side(p, local.theta, local.sigma, local.cov, i, 1.0)
+    assert len(up) > 1 and lowest_point(up) is None and np.all(np.diff([q.deviance for q in up]) > 0)
+
+
+def test_the_profiles_stop_on_the_same_side_whatever_the_workers(displaced):
+    """With ``stop_on_lower`` the first side in ridge-first order that reaches below the optimum is reported,
+    in one process as in two; without it the paths come back with those points."""
+    p, _, local, _ = displaced
+    idx = range(p.n_coef)
+    found = []
+    for processes in (1, 2):
+        with pytest.raises(LowerOptimum) as info:
+            profile_paths(p, local.theta, local.sigma, local.cov, idx, processes=processes, stop_on_lower=True)
+        found.append(info.value)
+    assert found[0].name == found[1].name == p.names[ridge_first(local.cov, idx)[0]]
+    assert found[0].point.deviance == found[1].point.deviance < -LOWER_OPTIMUM_DEVIANCE
+    paths = profile_paths(p, local.theta, local.sigma, local.cov, [0, 1], processes=1)
+    assert all(lowest_point(path.points) is not None for path in paths)
+
+
+def test_ridge_first_puts_the_correlated_parameters_first():
+    """Variance inflation Σ_ii (Σ⁻¹)_ii, scale-free: the pair correlated at 0.99 before the free one, whatever
+    the scales."""
+    corr = np.array([[1.0, 0.0, 0.1], [0.0, 1.0, 0.99], [0.1, 0.99, 1.0]])
+    scale = np.array([1e-5, 3.0, 1e2])
+    cov = corr * np.outer(scale, scale)
+    order = ridge_first(cov, [0, 1, 2])
+    assert set(order[:2]) == {1, 2} and order[2] == 0
+
+
+def test_the_least_squares_are_refitted_from_the_lower_point(displaced, tmp_path):
+    """posterior_approximation: the profiles find the lower point, the least squares are refitted from it (to the
+    lowest optimum), the files rewritten, and the profiles go through the new optimum."""
+    p, ls, local, _ = displaced
+    _, new = posterior_approximation(p, local, 1, tmp_path)
+    assert len(new.lower_optima) == 1
+    found = new.lower_optima[0]
+    assert found["profile"] in p.names[: p.n_coef] and found["deviance"] < -LOWER_OPTIMUM_DEVIANCE
+    assert found["earlier_cost"] == pytest.approx(_cost(local.theta, p, new.sigma))
+    assert new.cost < found["earlier_cost"] - 4.0          # CL0 3 sd off: ≈ 9/2 above the lowest point
+    sd = np.sqrt(np.diag(ls.cov))
+    assert np.max(np.abs(new.theta - ls.theta) / sd) < 0.01
+    saved = json.loads((tmp_path / "least_squares.json").read_text())
+    assert saved["lower_optima"] == json.loads(json.dumps(new.lower_optima))
+    assert np.array_equal(np.load(tmp_path / "least_squares_theta.npy"), new.theta)
+    profiles = json.loads((tmp_path / "profiles.json").read_text())
+    assert min(min(r["deviance"]) for r in profiles.values()) > -LOWER_OPTIMUM_DEVIANCE
