@@ -76,6 +76,10 @@ def test_ridge_first_puts_the_correlated_parameters_first():
     cov = corr * np.outer(scale, scale)
     order = ridge_first(cov, [0, 1, 2])
     assert set(order[:2]) == {1, 2} and order[2] == 0
+    # a held parameter (zero row and column, as refine_least_squares(free=...) leaves it) comes last
+    held = np.zeros((4, 4))
+    held[:3, :3] = cov
+    assert ridge_first(held, [3, 0, 1, 2])[2:] == [0, 3]
 
 
 def test_the_least_squares_are_refitted_from_the_lower_point(displaced, tmp_path):

@@ -10,7 +10,7 @@ Writes ``<output>/identifiability.json``:
      "profiles": {name: {value, deviance, shape}} (with --profiles),
      "posterior": {contraction, correlation, verdicts, agreement} (when `sample` has run),
      "data": {markers, inertial, inertial_only, text},
-     "least_squares": {cost, rms_mm (marker flights), noise: {sigma name: {value, unit}}},
+     "least_squares": {cost, rms_mm (marker flights), noise: {sigma name: {value, unit}}, lower_optima},
      "design": {"weak", "recommendation", "best", "ranking": [...]} or {"skipped": reason}}
 
 Runs with inertial logs: the entries besides the ten coefficients include the logger's shared mount
@@ -31,7 +31,7 @@ import numpy as np
 from ..inference.config import RunConfig
 from ..inference.data import build_problem
 from ..inference.leastsq import fit_least_squares, jacobian_blocks, noise_text
-from ..inference.profile import profile_paths
+from ..inference.profile import profiles_through_lowest
 from ..inference.run import RESULT
 from .identifiability import (ALPHA_PAIRS, coefficient_information, data_description, describe_throw,
                               design_skip_reason, flight_envelopes, marker_noise, rank_throws,
@@ -85,8 +85,21 @@ def run_identifiability(cfg: RunConfig, profiles: bool = False, design: bool = T
     ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
                            seed=cfg.sampler.seed)
     (out / "least_squares.json").write_text(json.dumps(ls.to_dict(), indent=1))   # the optimum (predict --from)
+    logger.info(f"{cfg.name}: least squares cost {ls.cost:.1f}, residual RMS {noise_text(ls.noise())}")
+    # profiles first: a path that reaches below the optimum has the least squares refitted (and everything
+    # below is then computed at the lower optimum)
+    paths, prof = None, None
+    if profiles:
+        def refitted(found, new):
+            logger.warning(f"{found}, which was not the lowest point: the least squares are refitted from there "
+                           f"(cost {new.cost:.1f}), then the profiles start again")
+            (out / "least_squares.json").write_text(json.dumps(new.to_dict(), indent=1))
+        found, ls = profiles_through_lowest(problem, ls, range(nc), processes=cfg.sampler.processes,
+                                            max_nfev=cfg.least_squares.max_nfev, on_refit=refitted)
+        paths = {p.name: p for p in found}
+        prof = {p.name: {"value": [q.value for q in p.points], "deviance": p.deviance.tolist(),
+                         "shape": p.classify(), "halfwidth": p.halfwidth()} for p in found}
     noise, marker_rms = ls.noise(), ls.marker_rms_mm()
-    logger.info(f"{cfg.name}: least squares cost {ls.cost:.1f}, residual RMS {noise_text(noise)}")
     data = data_description(problem)
     # envelope
     env = flight_envelopes(problem, ls.theta)
@@ -109,18 +122,12 @@ def run_identifiability(cfg: RunConfig, profiles: bool = False, design: bool = T
     fisher = {"condition_number": float(ev[-1] / max(ev[0], 1e-300)), "eigenvalues": ev.tolist(),
               "scale": "information per prior variance (eigenvalue 1: data as informative as the prior)",
               "weak_directions": weak_directions(info, prior_sd, cov_coef, names)}
-    # profiles
-    paths, prof = None, None
-    if profiles:
-        found = profile_paths(problem, ls.theta, ls.sigma, ls.cov, range(nc), processes=cfg.sampler.processes)
-        paths = {p.name: p for p in found}
-        prof = {p.name: {"value": [q.value for q in p.points], "deviance": p.deviance.tolist(),
-                         "shape": p.classify(), "halfwidth": p.halfwidth()} for p in found}
     floors = {q.name: q.prior_sd for q in problem.layout.observation_parameters}   # a logger's mount: may be 0
     coefs = verdicts_from_covariance(names, ls.theta[:nc], cov_coef, prior_sd, span, paths, data["text"], floors)
     result = {n: {"verdict": v["verdict"], "reason": v["reason"]} for n, v in coefs.items()}
     result.update({"coefficients": coefs, "envelope": envelope, "fisher": fisher, "data": data,
-                   "least_squares": {"cost": ls.cost, "rms_mm": marker_rms, "noise": noise}})
+                   "least_squares": {"cost": ls.cost, "rms_mm": marker_rms, "noise": noise,
+                                     "lower_optima": ls.lower_optima}})
     if prof is not None:
         result["profiles"] = prof
     post = _posterior_block(out, names)

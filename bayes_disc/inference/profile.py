@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..physics.parallel import mp_context
-from .leastsq import MU_NEAR, jacobian_blocks, minimise, whitened_residuals
+from .leastsq import MU_NEAR, LeastSquaresResult, jacobian_blocks, minimise, refit_from_lower, whitened_residuals
 from .model import Problem
 
 #: the path stops past this profile deviance (≈ 3.5 σ for a Gaussian)
@@ -63,14 +63,20 @@ DECREMENT_TOL = 0.25 * DEVIANCE_TOL
 #: still bounds the profile but is not ``ok`` (not used as a posterior approximation)
 FAILED_DEVIANCE_FACTOR = 4.0
 #: a point whose deviance is below −LOWER_OPTIMUM_DEVIANCE has a lower cost than the least-squares optimum the
-#: paths start from (the profile fits are accurate to ~10⁻³, the optimum's refinement to 10⁻⁵): that optimum
-#: was a local one, and the side stops there (:class:`LowerOptimum`). On seed 19's 12 flights of
-#: ``benchmarks/bench_scale.py`` the least squares ended in a mode 2.0 deviance units above another (CM0, CMa,
-#: CMq 2.9, 2.1, 3.0 Laplace sds away; the straight line between the two crosses a barrier of D ≈ 360), which
-#: the profiles of CM0 (D = −0.62 at t = −1.8) and CMa (D = −1.95 at t = +1.8) reach along the ridge. From the
-#: local optimum five profile fits crawled to their budget toward it, 673 Jacobians in all; from the lower
-#: one, 366 and none at its budget
+#: paths start from (the profile fits are accurate to ~10⁻³, the optimum's refinement to 10⁻⁵): that optimum was
+#: not the lowest point (a local optimum, or a fit that stopped short of it), and the side stops there
+#: (:class:`LowerOptimum`). On seed 19's 12 flights of ``benchmarks/bench_scale.py`` the least squares ended in a
+#: mode 2.0 deviance units above another (CM0, CMa, CMq 2.9, 2.1, 3.0 Laplace sds away; the straight line between
+#: the two crosses a barrier of D ≈ 360), which the profiles of CM0 (D = −0.62 at t = −1.8) and CMa (D = −1.95 at
+#: t = +1.8) reach along the ridge. From the local optimum five profile fits crawled toward it to their budget,
+#: 673 Jacobians in all; from the lower one, 366 and none at its budget. On the real throws of runs/flatball,
+#: imu_offset_z's profile reached D = −0.16 at t = −1 (a refinement that had stopped short)
 LOWER_OPTIMUM_DEVIANCE = 0.1
+
+
+#: least-squares refits from a lower point a profile found (:func:`profiles_through_lowest`) before the paths are
+#: taken as they come
+MAX_LOWER_REFITS = 2
 
 
 class LowerOptimum(Exception):
@@ -86,7 +92,7 @@ class LowerOptimum(Exception):
     """
 
     def __init__(self, name: str, point: "ProfilePoint"):
-        super().__init__(f"the profile of {name} found a lower cost than the least-squares optimum "
+        super().__init__(f"the profile of {name} reached below the least-squares optimum "
                          f"(deviance {point.deviance:.2f} at t = {point.t:+.2f})")
         self.name, self.point = name, point
 
@@ -354,16 +360,19 @@ def ridge_first(cov: np.ndarray, indices) -> list[int]:
     Parameters
     ----------
     cov : (dim, dim) array
-        Gauss–Newton covariance at the optimum.
+        Gauss–Newton covariance at the optimum (held parameters: zero rows and columns, inflation 0).
     indices : iterable of int
         Parameters to order.
 
     Returns
     -------
     list of int
+        Ties keep the order of ``indices``.
     """
-    d = np.sqrt(np.diag(cov))
-    inflation = np.diag(np.linalg.inv(cov / np.outer(d, d)))
+    d = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    live = d > 0                                    # held parameters have zero rows and columns
+    inflation = np.zeros(d.size)
+    inflation[live] = np.diag(np.linalg.inv(cov[np.ix_(live, live)] / np.outer(d[live], d[live])))
     return sorted(indices, key=lambda i: -inflation[i])
 
 
@@ -437,3 +446,53 @@ def profile_paths(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, co
             return collect(pool.imap(_side_task, tasks))
     finally:
         _POOL.clear()
+
+
+def profiles_through_lowest(problem: Problem, ls: LeastSquaresResult, indices, processes: int = 1, progress=None,
+                            max_nfev: int = 200, on_refit=None, **kwargs) -> tuple[list[ProfilePath], LeastSquaresResult]:
+    """Profile paths through the least-squares optimum, refitted first wherever a path shows it was not the
+    lowest point.
+
+    The paths (:func:`profile_paths`) stop at the first side that reaches below ``ls``'s optimum
+    (:class:`LowerOptimum`); the least squares are refitted from that point (:func:`.leastsq.refit_from_lower`)
+    and the paths start again from the new optimum, at most :data:`MAX_LOWER_REFITS` times (the last paths are
+    kept as they come, points below the optimum included).
+
+    Parameters
+    ----------
+    problem : Problem
+        The run's statistical problem.
+    ls : LeastSquaresResult
+        The least-squares optimum (theta, sigma [m] per flight, covariance).
+    indices : iterable of int
+        Parameters to profile.
+    processes : int
+        Worker processes of the profile fits.
+    progress : callable, optional
+        ``progress(path, done, total)`` after each profile (:func:`profile_paths`); counts start again after a refit.
+    max_nfev : int
+        Evaluation budget of each refinement round of a refit.
+    on_refit : callable, optional
+        Called as ``on_refit(found, ls)`` after each refit: the :class:`LowerOptimum` and the new result.
+    **kwargs
+        Passed to :func:`profile_side`.
+
+    Returns
+    -------
+    paths : list of ProfilePath
+        One per index, in the order of ``indices``, through ``ls``'s optimum as returned.
+    ls : LeastSquaresResult
+        ``ls`` itself, or its last refit (``lower_optima`` records each).
+    """
+    indices = list(indices)
+    for attempt in range(MAX_LOWER_REFITS + 1):
+        try:
+            return profile_paths(problem, ls.theta, ls.sigma, ls.cov, indices, processes=processes, progress=progress,
+                                 stop_on_lower=attempt < MAX_LOWER_REFITS, **kwargs), ls
+        except LowerOptimum as found:
+            ls = refit_from_lower(problem, ls, found.point.theta, max_nfev=max_nfev,
+                                  found={"profile": found.name, "t": float(found.point.t),
+                                         "deviance": float(found.point.deviance)})
+            if on_refit is not None:
+                on_refit(found, ls)
+    raise AssertionError("unreachable: the last attempt does not stop on a lower point")

@@ -33,9 +33,9 @@ from .config import RunConfig
 from ..observation.models import MarkerPositions
 from .data import build_problem
 from .inertial import load_run_throws
-from .leastsq import START_FLIGHTS, fit_least_squares, noise_text, refit_from_lower
+from .leastsq import START_FLIGHTS, fit_least_squares, noise_text
 from .results import build_inference_data, build_summary, format_table, prior_record, writing_posterior
-from .profile import LowerOptimum, lowest_point, profile_paths
+from .profile import MAX_LOWER_REFITS, lowest_point, profiles_through_lowest
 from .robust import (FLAGGED, JUDGEMENT_AVERAGE, average_over_judgement, gross_error_advice, robust_flights,
                      robust_refit, suspected_gross_errors, with_saved_flags)
 from .proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
@@ -307,19 +307,13 @@ def _average_over_judgement(raw, problem, chains, cfg: RunConfig, out: Path) -> 
                      "weights not trusted; see ") + str(out / JUDGEMENT_AVERAGE))
 
 
-#: least-squares refits from a lower point a profile found (:class:`.profile.LowerOptimum`) before the profiles
-#: are taken as they are
-MAX_LOWER_REFITS = 2
-
-
 def posterior_approximation(problem, ls, processes: int, out: Path, progress: bool = False, max_nfev: int = 200):
     """Profile paths of the coefficients through the least-squares optimum and the ridge-aware
     independence proposal built from them (:func:`.proposals.independence_proposal`).
 
-    A profile that reaches a lower cost than the optimum (:class:`.profile.LowerOptimum`) shows the optimum
-    was a local one: the least squares are refitted from that point (:func:`.leastsq.refit_from_lower`, the
-    least-squares files rewritten) and the profiles start again from the new optimum, at most
-    :data:`MAX_LOWER_REFITS` times.
+    A profile that reaches a lower cost than the optimum shows the optimum was not the lowest point (a local optimum, or a fit stopped short of it): the least squares
+    are refitted from that point and the profiles start again (:func:`.profile.profiles_through_lowest`); the
+    least-squares files are rewritten and a warning names the profile.
 
     Parameters
     ----------
@@ -346,36 +340,32 @@ def posterior_approximation(problem, ls, processes: int, out: Path, progress: bo
     from tqdm import tqdm
     idx = range(problem.n_coef + problem.n_ext)
     with stage("profile likelihoods", f"{len(idx)} coefficients in {processes} process(es)") as st:
-        for attempt in range(MAX_LOWER_REFITS + 1):
-            bar = tqdm(total=len(idx), desc="profiles", unit="coefficient", leave=False,
-                       disable=None if progress else True)
+        bar = tqdm(total=len(idx), desc="profiles", unit="coefficient", leave=False,
+                   disable=None if progress else True)
 
-            def report(path, done, total):
-                bar.set_postfix_str(path.name, refresh=False)
-                bar.update(1)
-                if bar.disable:
-                    logger.info(f"profile likelihood {done}/{total}: {path.name}, {len(path.points)} points, "
-                                f"{path.classify()} ({st.elapsed:.0f} s)")
-            try:
-                paths = profile_paths(problem, ls.theta, ls.sigma, ls.cov, idx, processes=processes, progress=report,
-                                      stop_on_lower=attempt < MAX_LOWER_REFITS)
-                break
-            except LowerOptimum as found:
-                logger.warning(f"{found}, which was a local one (cost {ls.cost:.1f}): refitting the least squares "
-                               "from that point, then the profiles again")
-                ls = refit_from_lower(problem, ls, found.point.theta, max_nfev=max_nfev,
-                                      found={"profile": found.name, "t": float(found.point.t),
-                                             "deviance": float(found.point.deviance)})
-                _save_least_squares(ls, out)
-                logger.info(f"least squares refitted: cost {ls.cost:.1f} (the earlier optimum's with the new noise "
-                            f"scales: {ls.lower_optima[-1]['earlier_cost']:.1f}), RMS {noise_text(ls.to_dict()['noise'])}")
-            finally:
-                bar.close()
+        def report(path, done, total):
+            bar.set_postfix_str(path.name, refresh=False)
+            bar.update(1)
+            if bar.disable:
+                logger.info(f"profile likelihood {done}/{total}: {path.name}, {len(path.points)} points, "
+                            f"{path.classify()} ({st.elapsed:.0f} s)")
+
+        def refitted(found, new):
+            bar.reset()
+            logger.warning(f"{found}, which was not the lowest point: the least squares are refitted from there "
+                           f"(cost {new.cost:.1f}; the earlier optimum's with the new noise scales "
+                           f"{new.lower_optima[-1]['earlier_cost']:.1f}), then the profiles start again")
+            _save_least_squares(new, out)
+        try:
+            paths, ls = profiles_through_lowest(problem, ls, idx, processes=processes, progress=report,
+                                                max_nfev=max_nfev, on_refit=refitted)
+        finally:
+            bar.close()
         below = [p.name for p in paths if lowest_point(p.points) is not None]
         if below:
             logger.warning(f"the profiles of {', '.join(below)} still reach below the least-squares optimum after "
-                           f"{MAX_LOWER_REFITS} refits from lower points: the posterior has several modes close "
-                           "in cost; the sampler starts from all of them")
+                           f"{MAX_LOWER_REFITS} refits from lower points: the posterior has several modes close in "
+                           "cost (the profiles and the proposal built on them include those points)")
         proposal = independence_proposal(problem, ls.theta, ls.cov, paths)
         record = {}
         for path in paths:
