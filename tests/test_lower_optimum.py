@@ -7,7 +7,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from bayes_disc.cli import main
+from bayes_disc.diagnostics import run as diag_run
 from bayes_disc.inference import profile
+from bayes_disc.inference.config import load_config
 from bayes_disc.inference.initial import initial_state_from_data
 from bayes_disc.inference.leastsq import minimise, refine_least_squares, whitened_residuals
 from bayes_disc.inference.model import Problem
@@ -15,6 +18,8 @@ from bayes_disc.inference.profile import (LOWER_OPTIMUM_DEVIANCE, LowerOptimum, 
                                           profile_side, ridge_first)
 from bayes_disc.inference.run import posterior_approximation
 from bayes_disc.observation.synth import DEFAULT_MARKERS, LaunchSpec, SynthSpec, synthesize
+
+from conftest import REPO, keep_flights
 
 
 def _cost(x, p, sigma):
@@ -99,3 +104,35 @@ def test_the_least_squares_are_refitted_from_the_lower_point(displaced, tmp_path
     assert np.array_equal(np.load(tmp_path / "least_squares_theta.npy"), new.theta)
     profiles = json.loads((tmp_path / "profiles.json").read_text())
     assert min(min(r["deviance"]) for r in profiles.values()) > -LOWER_OPTIMUM_DEVIANCE
+
+
+def test_identifiability_profiles_refit_a_least_squares_that_stopped_short(tmp_path, monkeypatch):
+    """``identifiability --profiles`` given a least-squares result away from the optimum (CL0 held 3 sd off, as
+    a fit that stopped short would leave it): its profiles reach below, the least squares are refitted, and the
+    Fisher analysis, verdicts and least_squares.json are those of the refitted optimum."""
+    (tmp_path / "synth.yaml").write_text((REPO / "runs/demo/synth.yaml").read_text())
+    assert main(["synth", str(tmp_path / "synth.yaml")]) == 0
+    keep_flights(tmp_path / "flights.csv", {"bsfl5", "fffl10"})
+    (tmp_path / "config.yaml").write_text((REPO / "runs/demo/config.yaml").read_text().replace("truth: truth.json", ""))
+    real = diag_run.fit_least_squares
+    held = {}
+
+    def stopped_short(problem, **kwargs):
+        ls = real(problem, **kwargs)
+        i = problem.names.index("CL0")
+        x = profile._fixed_fit(problem, ls.sigma, ls.theta, ls.cov, i, ls.theta[i] + 3 * np.sqrt(ls.cov[i, i]), 100,
+                               _cost(ls.theta, problem, ls.sigma))[0]
+        held.update(lowest=ls, off=x)
+        return replace(ls, theta=x, cost=_cost(x, problem, ls.sigma))
+    monkeypatch.setattr(diag_run, "fit_least_squares", stopped_short)
+    r = diag_run.run_identifiability(load_config(tmp_path / "config.yaml"), profiles=True, design=False)
+    assert len(r["least_squares"]["lower_optima"]) == 1
+    saved = json.loads((tmp_path / "out/least_squares.json").read_text())
+    assert saved["lower_optima"] == r["least_squares"]["lower_optima"]
+    theta = np.array([saved["parameters"][n]["value"] for n in held["lowest"].names])
+    sd = np.sqrt(np.diag(held["lowest"].cov))
+    assert np.max(np.abs(theta - held["lowest"].theta) / sd) < 0.01           # back at the optimum
+    assert np.max(np.abs(held["off"] - held["lowest"].theta) / sd) > 2.5        # from 3 sd off
+    assert min(min(p["deviance"]) for p in r["profiles"].values()) > -LOWER_OPTIMUM_DEVIANCE
+    cl0 = r["coefficients"]["CL0"]
+    assert cl0["value"] == pytest.approx(held["lowest"].theta[0], abs=0.01 * sd[0])
