@@ -602,3 +602,14 @@ def test_noise_rms_formats_old_and_new_runs_alike():
     assert _noise_rms(new) == "bsfl5 1.52 mm, gyro_axial 0.0127 rad/s"
     assert _noise_rms({"rms_mm": {"bsfl5": 1.52, "fffl10": 0.98}}) == "bsfl5 1.52 mm, fffl10 0.98 mm"
     assert _noise_rms({}) == ""
+
+
+def test_refits_from_a_lower_point_are_listed_in_the_appendix():
+    """Each ``lower_optima`` record of the least squares (profile.profiles_through_lowest) is one appendix row;
+    runs written before the key have none."""
+    from bayes_disc.report.content import _lower_optimum_rows
+    ls = {"cost": 5918.806, "lower_optima": [{"profile": "CM0", "t": -1.797, "deviance": -0.6227, "earlier_cost": 5919.83}]}
+    rows = _lower_optimum_rows(ls)
+    assert len(rows) == 1 and rows[0][0] == "refit 1 from a lower point"
+    assert "CM0" in rows[0][1] and "-0.62 at t = -1.80" in rows[0][1] and "scales: 5919.8, the new one's 5918.8" in rows[0][1]
+    assert _lower_optimum_rows({}) == [] and _lower_optimum_rows({"lower_optima": []}) == []

@@ -665,7 +665,8 @@ def refine_least_squares(problem: Problem, x0: np.ndarray, max_nfev: int = 200, 
 def refit_from_lower(problem: Problem, ls: LeastSquaresResult, x: np.ndarray, found: dict,
                      max_nfev: int = 200) -> LeastSquaresResult:
     """The least squares refitted from x, a point of lower cost than ``ls``'s optimum (a profile point,
-    :class:`.profile.LowerOptimum`): ``ls`` was a local optimum that every start ended in.
+    :class:`.profile.LowerOptimum`): ``ls`` was not the lowest point (a local optimum that every start ended
+    in, or a refinement that stopped short of its optimum).
 
     Parameters
     ----------

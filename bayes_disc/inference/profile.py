@@ -26,9 +26,10 @@ the marginal's mass. The same holds where the profile stays flat but ln g rises 
 than the deviance grows): a flat side goes on past :data:`MAX_POINTS` once ln g has risen by more than
 :data:`MARGINAL_RISE` along it, until it has fallen by ``max_deviance``/2 from its best.
 
-A path that reaches a lower cost than θ̂ (deviance below −:data:`LOWER_OPTIMUM_DEVIANCE`) shows θ̂ to be a local
-optimum; :func:`profile_paths` can then stop (:class:`LowerOptimum`) so that the least squares are refitted from
-that point and the paths start again (:func:`.run.posterior_approximation`).
+A path that reaches a lower cost than θ̂ (deviance below −:data:`LOWER_OPTIMUM_DEVIANCE`) shows θ̂ not to be the
+lowest point (a local optimum, or a fit that stopped short of it); :func:`profile_paths` can then stop
+(:class:`LowerOptimum`) so that the least squares are refitted from that point and the paths start again
+(:func:`profiles_through_lowest`).
 """
 from __future__ import annotations
 
@@ -282,7 +283,7 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
     the deviance stays below ``max_deviance``, and past ``max_deviance`` once the Laplace marginal ln g
     (module docstring) has fallen by ``max_deviance``/2 from its highest value on that side, or after
     ``extended_points`` points (:func:`side_done`); and at a point below the optimum (deviance
-    < −:data:`LOWER_OPTIMUM_DEVIANCE`: θ̂ was a local optimum). The two sides start from θ̂ and do not depend on each
+    < −:data:`LOWER_OPTIMUM_DEVIANCE`: θ̂ was not the lowest point). The two sides start from θ̂ and do not depend on each
     other. ``mu0`` is every fit's initial damping (:func:`.leastsq.minimise`), ``dtol`` its decrement
     tolerance (:func:`_fixed_fit`).
 
@@ -355,7 +356,7 @@ def lowest_point(points: list[ProfilePoint]) -> ProfilePoint | None:
 def ridge_first(cov: np.ndarray, indices) -> list[int]:
     """``indices`` by decreasing variance inflation Σ_ii (Σ⁻¹)_ii (how much the other parameters widen θ_i's
     Laplace sd; the scale-free correlation matrix inverted): the parameters on the posterior's ridges, whose
-    sides are the longest and slowest (12 points instead of 4–5, and the crawling fits), come first.
+    sides are the longest and slowest (up to 18 points instead of 4–5, and the crawling fits), come first.
 
     Parameters
     ----------

@@ -107,12 +107,7 @@ def appendix_section(ctx) -> Section:
     sampler = table(["sampler setting", "value"], _sampler_rows(settings, conv), "kv")
     ls = s.get("least_squares") or {}
     ls_rows = [("cost", fmt(ls.get("cost"))), ("condition number", fmt(ls.get("condition_number"), 3)),
-               ("residual RMS per noise group", _noise_rms(ls))]
-    for k, low in enumerate(ls.get("lower_optima") or []):
-        ls_rows.append((f"refit {k + 1} from a lower point",
-                        f"the profile of {low['profile']} reached deviance {low['deviance']:.2f} below the earlier "
-                        f"optimum (t = {low['t']:+.2f}); that optimum's cost with the new noise scales: "
-                        f"{fmt(low['earlier_cost'])}"))
+               ("residual RMS per noise group", _noise_rms(ls)), *_lower_optimum_rows(ls)]
     recorded = info.get("versions")
     if isinstance(recorded, dict) and recorded:
         software = ("<h3>Software (recorded by the run)</h3>"
@@ -128,6 +123,16 @@ def appendix_section(ctx) -> Section:
                    "How the result was produced: files, prior, sampler settings, the least-squares start and "
                    "the software versions.", html)
 
+
+
+def _lower_optimum_rows(ls: dict) -> list[tuple[str, str]]:
+    """One appendix row per least-squares refit from a point a profile found below the optimum
+    (``lower_optima`` of ``least_squares.json``; none for runs written before that key)."""
+    return [(f"refit {k + 1} from a lower point",
+             f"the profile of {low['profile']} went below the earlier optimum (deviance {low['deviance']:.2f} at "
+             f"t = {low['t']:+.2f}); that optimum's cost with the new noise scales: {low['earlier_cost']:.1f}, the new one's "
+             f"{ls['cost']:.1f}")
+            for k, low in enumerate(ls.get("lower_optima") or [])]
 
 
 def _noise_rms(ls: dict) -> str:
