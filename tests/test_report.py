@@ -608,8 +608,10 @@ def test_refits_from_a_lower_point_are_listed_in_the_appendix():
     """Each ``lower_optima`` record of the least squares (profile.profiles_through_lowest) is one appendix row;
     runs written before the key have none."""
     from bayes_disc.report.content import _lower_optimum_rows
-    ls = {"cost": 5918.806, "lower_optima": [{"profile": "CM0", "t": -1.797, "deviance": -0.6227, "earlier_cost": 5919.83}]}
+    ls = {"cost": 5918.806,
+          "lower_optima": [{"profile": "CM0", "t": -1.797, "deviance": -0.6227, "earlier_cost": 5919.83}]}
     rows = _lower_optimum_rows(ls)
     assert len(rows) == 1 and rows[0][0] == "refit 1 from a lower point"
-    assert "CM0" in rows[0][1] and "-0.62 at t = -1.80" in rows[0][1] and "scales: 5919.8, the new one's 5918.8" in rows[0][1]
+    text = rows[0][1]
+    assert "CM0" in text and "-0.62 at t = -1.80" in text and "scales: 5919.8, the new one's 5918.8" in text
     assert _lower_optimum_rows({}) == [] and _lower_optimum_rows({"lower_optima": []}) == []

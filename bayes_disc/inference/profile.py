@@ -67,9 +67,9 @@ FAILED_DEVIANCE_FACTOR = 4.0
 #: paths start from (the profile fits are accurate to ~10⁻³, the optimum's refinement to 10⁻⁵): that optimum was
 #: not the lowest point (a local optimum, or a fit that stopped short of it), and the side stops there
 #: (:class:`LowerOptimum`). On seed 19's 12 flights of ``benchmarks/bench_scale.py`` the least squares ended in a
-#: mode 2.0 deviance units above another (CM0, CMa, CMq 2.9, 2.1, 3.0 Laplace sds away; the straight line between
-#: the two crosses a barrier of D ≈ 360), which the profiles of CM0 (D = −0.62 at t = −1.8) and CMa (D = −1.95 at
-#: t = +1.8) reach along the ridge. From the local optimum five profile fits crawled toward it to their budget,
+#: mode 2.0 deviance units above another (CM0, CMa, CMq 2.9, 2.1, 3.0 Laplace sds away; the straight line
+#: between the two crosses a barrier of D ≈ 360), which the profiles of CM0 (D = −0.62 at t = −1.8) and CMa
+#: (D = −1.95 at t = +1.8) reach along the ridge. From the local optimum five profile fits crawled toward it to their budget,
 #: 673 Jacobians in all; from the lower one, 366 and none at its budget. On the real throws of runs/flatball,
 #: imu_offset_z's profile reached D = −0.16 at t = −1 (a refinement that had stopped short)
 LOWER_OPTIMUM_DEVIANCE = 0.1
@@ -283,9 +283,9 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
     the deviance stays below ``max_deviance``, and past ``max_deviance`` once the Laplace marginal ln g
     (module docstring) has fallen by ``max_deviance``/2 from its highest value on that side, or after
     ``extended_points`` points (:func:`side_done`); and at a point below the optimum (deviance
-    < −:data:`LOWER_OPTIMUM_DEVIANCE`: θ̂ was not the lowest point). The two sides start from θ̂ and do not depend on each
-    other. ``mu0`` is every fit's initial damping (:func:`.leastsq.minimise`), ``dtol`` its decrement
-    tolerance (:func:`_fixed_fit`).
+    < −:data:`LOWER_OPTIMUM_DEVIANCE`: θ̂ was not the lowest point). The two sides start from θ̂ and do not
+    depend on each other. ``mu0`` is every fit's initial damping (:func:`.leastsq.minimise`), ``dtol`` its
+    decrement tolerance (:func:`_fixed_fit`).
 
     Returns
     -------
@@ -450,7 +450,8 @@ def profile_paths(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, co
 
 
 def profiles_through_lowest(problem: Problem, ls: LeastSquaresResult, indices, processes: int = 1, progress=None,
-                            max_nfev: int = 200, on_refit=None, **kwargs) -> tuple[list[ProfilePath], LeastSquaresResult]:
+                            max_nfev: int = 200, on_refit=None,
+                            **kwargs) -> tuple[list[ProfilePath], LeastSquaresResult]:
     """Profile paths through the least-squares optimum, refitted first wherever a path shows it was not the
     lowest point.
 

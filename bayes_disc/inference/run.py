@@ -311,9 +311,10 @@ def posterior_approximation(problem, ls, processes: int, out: Path, progress: bo
     """Profile paths of the coefficients through the least-squares optimum and the ridge-aware
     independence proposal built from them (:func:`.proposals.independence_proposal`).
 
-    A profile that reaches a lower cost than the optimum shows the optimum was not the lowest point (a local optimum, or a fit stopped short of it): the least squares
-    are refitted from that point and the profiles start again (:func:`.profile.profiles_through_lowest`); the
-    least-squares files are rewritten and a warning names the profile.
+    A profile that reaches a lower cost than the optimum shows the optimum was not the lowest point (a local
+    optimum, or a fit stopped short of it): the least squares are refitted from that point and the profiles
+    start again (:func:`.profile.profiles_through_lowest`); the least-squares files are rewritten and a warning
+    names the profile.
 
     Parameters
     ----------

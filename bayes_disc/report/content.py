@@ -130,8 +130,8 @@ def _lower_optimum_rows(ls: dict) -> list[tuple[str, str]]:
     (``lower_optima`` of ``least_squares.json``; none for runs written before that key)."""
     return [(f"refit {k + 1} from a lower point",
              f"the profile of {low['profile']} went below the earlier optimum (deviance {low['deviance']:.2f} at "
-             f"t = {low['t']:+.2f}); that optimum's cost with the new noise scales: {low['earlier_cost']:.1f}, the new one's "
-             f"{ls['cost']:.1f}")
+             f"t = {low['t']:+.2f}); that optimum's cost with the new noise scales: {low['earlier_cost']:.1f}, "
+             f"the new one's {ls['cost']:.1f}")
             for k, low in enumerate(ls.get("lower_optima") or [])]
 
 
