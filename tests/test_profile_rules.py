@@ -56,3 +56,25 @@ def test_conditional_start_is_the_constrained_optimum_of_a_quadratic():
     want[i] = v
     want[free] = mu[free] - np.linalg.solve(H[np.ix_(free, free)], H[free, i] * (v - mu[i]))
     np.testing.assert_allclose(conditional_start(mu, np.linalg.inv(H), i, v), want, rtol=1e-10, atol=1e-12)
+
+
+def test_bent_start_is_exact_on_a_parabolic_path():
+    """A path θ_1*(v) = c v² profiled along θ_0 = v: the conditional start follows the tangent and misses by
+    c h² over a step h; :func:`bent_start` adds the last miss scaled by the steps' ratio squared and lands on
+    the path exactly, for any step."""
+    from bayes_disc.inference.profile import bent_start, conditional_start
+    c = 0.7
+
+    def point(v):
+        return np.array([v, c * v * v])
+
+    def cov_at(v):                                       # regression of θ_1 on θ_0: the tangent 2 c v
+        return np.array([[1.0, 2 * c * v], [2 * c * v, 4 * c * c * v * v + 1.0]])
+
+    v0, v1, v2 = 0.3, 0.8, 1.55                          # unequal steps
+    miss = point(v1) - conditional_start(point(v0), cov_at(v0), 0, v1)
+    np.testing.assert_allclose(miss, [0.0, c * (v1 - v0) ** 2])
+    plain = conditional_start(point(v1), cov_at(v1), 0, v2)
+    bent = bent_start(point(v1), cov_at(v1), 0, v2, miss, (v2 - v1) / (v1 - v0))
+    np.testing.assert_allclose(bent, point(v2), rtol=1e-12)
+    assert abs(plain[1] - point(v2)[1]) > 0.3            # the tangent alone misses by c h²

@@ -69,9 +69,9 @@ FAILED_DEVIANCE_FACTOR = 4.0
 #: (:class:`LowerOptimum`). On seed 19's 12 flights of ``benchmarks/bench_scale.py`` the least squares ended in a
 #: mode 2.0 deviance units above another (CM0, CMa, CMq 2.9, 2.1, 3.0 Laplace sds away; the straight line
 #: between the two crosses a barrier of D ≈ 360), which the profiles of CM0 (D = −0.62 at t = −1.8) and CMa
-#: (D = −1.95 at t = +1.8) reach along the ridge. From the local optimum five profile fits crawled toward it to their budget,
-#: 673 Jacobians in all; from the lower one, 366 and none at its budget. On the real throws of runs/flatball,
-#: imu_offset_z's profile reached D = −0.16 at t = −1 (a refinement that had stopped short)
+#: (D = −1.95 at t = +1.8) reach along the ridge. From the local optimum five profile fits crawled toward it to
+#: their budget, 673 Jacobians in all; from the lower one, 366 and none at its budget. On the real throws of
+#: runs/flatball, imu_offset_z's profile reached D = −0.16 at t = −1 (a refinement that had stopped short)
 LOWER_OPTIMUM_DEVIANCE = 0.1
 
 
@@ -240,14 +240,51 @@ def conditional_start(x: np.ndarray, cov: np.ndarray, index: int, value: float) 
     return out
 
 
+def bent_start(x: np.ndarray, cov: np.ndarray, index: int, value: float, miss: np.ndarray,
+               ratio: float) -> np.ndarray:
+    """:func:`conditional_start` corrected for the path's curvature: the previous step's miss (where that step's
+    constrained optimum lay, less its conditional start) scaled by the square of the steps' ratio. A linear
+    prediction along a smooth path θ*(v) misses by ½ θ*''(v) h² over a step h, so the last miss m over a step h'
+    predicts the next one as m (h/h')²:
+
+        x₀ = x + Σ_·i / Σ_ii · (value − x_i) + m · ratio²,    ratio = h / h'.
+
+    Parameters
+    ----------
+    x : (dim,) array
+        The last point of the path.
+    cov : (dim, dim) array
+        Its local covariance.
+    index : int
+        The profiled parameter i.
+    value : float
+        Its next value.
+    miss : (dim,) array
+        The last point less the conditional start it was fitted from (zero at i).
+    ratio : float
+        The next step over the last one.
+
+    Returns
+    -------
+    (dim,) array
+        θ_i = ``value`` exactly.
+    """
+    out = conditional_start(x, cov, index, value) + miss * ratio ** 2
+    out[index] = value
+    return out
+
+
 def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, cov0: np.ndarray, index: int, value: float,
-               max_nfev: int, cost0: float, mu0: float = MU_NEAR, dtol: float = DECREMENT_TOL):
+               max_nfev: int, cost0: float, mu0: float = MU_NEAR, dtol: float = DECREMENT_TOL,
+               bent: np.ndarray | None = None):
     """Optimum of every parameter but ``index`` (held at ``value``): (θ*, cost, converged, J), J the whitened
     Jacobian over every parameter at θ* (:class:`.arrow.ArrowJacobian`, for the point's covariance).
 
-    The fit starts from the better (lower cost) of x0 with θ_i set to ``value`` and :func:`conditional_start`
-    (x0, cov0): on the 24-flight benchmark the latter halves the Jacobians per fit (7.2 → 3.6 at 4 flights,
-    8.4 → 5.1 at 24) and the former guards a curved ridge where the linear prediction overshoots. Both starts
+    The fit starts from the best (lowest cost) of x0 with θ_i set to ``value``, :func:`conditional_start`
+    (x0, cov0) and, when given, ``bent`` (:func:`bent_start`): on the 24-flight benchmark the conditional start
+    halves the Jacobians per fit (7.2 → 3.6 at 4 flights, 8.4 → 5.1 at 24), the bent one saves another 13 %
+    (seed 19 of ``benchmarks/bench_scale.py``, the ten coefficients' profiles: 268 → 233 Jacobians at 4 flights,
+    342 → 296 at 24), and the held start guards a curved ridge where the predictions overshoot. The starts
     are next to the constrained optimum, so the fit starts with little damping ``mu0``
     (:data:`.leastsq.MU_NEAR`: 3.0–3.1 Jacobians per fit at 4–24 flights, against 4.2–6.6 with
     :data:`.leastsq.MU_FAR`). It stops when the Gauss–Newton decrement (the cost decrease its quadratic model
@@ -259,7 +296,7 @@ def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, cov0: np.nda
     free[index] = False
     held = x0.copy()
     held[index] = value
-    starts = [held, conditional_start(x0, cov0, index, value)]
+    starts = [held, conditional_start(x0, cov0, index, value)] + ([bent] if bent is not None else [])
     costs = [0.5 * float(np.sum(np.square(whitened_residuals(z, problem, sigma)))) for z in starts]
     x = starts[int(np.argmin(costs))]
     ftol = 0.5 * DEVIANCE_TOL / max(cost0, 1e-300)
@@ -278,7 +315,8 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
     through the least-squares optimum ``theta_hat`` (noise ``sigma``, covariance ``cov_hat``).
 
     Steps are one local sd of θ_i (from the local covariance, at least half the optimum's sd), each fit
-    started from the previous point moved along its local covariance (:func:`_fixed_fit`). The side stops
+    started from the previous point moved along its local covariance, corrected for the path's curvature
+    from the second point on (:func:`_fixed_fit`, :func:`bent_start`). The side stops
     when a fit fails, past ``FAILED_DEVIANCE_FACTOR`` · ``max_deviance``, after ``max_points`` points while
     the deviance stays below ``max_deviance``, and past ``max_deviance`` once the Laplace marginal ln g
     (module docstring) has fallen by ``max_deviance``/2 from its highest value on that side, or after
@@ -298,11 +336,14 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
     volume0 = conditional_log_volume(cov_hat, index)
     points: list[ProfilePoint] = []
     x, cov, step, best = theta_hat.copy(), cov_hat, sd0, 0.0
+    miss = last_step = None
     for k in range(max(max_points, extended_points)):
         value = float(x[index] + side * step)
-        x_new, cost, ok, J = _fixed_fit(problem, sigma, x, cov, index, value, max_nfev, cost0, mu0, dtol)
+        bent = None if miss is None else bent_start(x, cov, index, value, miss, step / last_step)
+        x_new, cost, ok, J = _fixed_fit(problem, sigma, x, cov, index, value, max_nfev, cost0, mu0, dtol, bent)
         if not (ok and np.isfinite(cost)):
             break
+        miss, last_step = x_new - conditional_start(x, cov, index, value), step
         cov = J.information().inverse()
         dev = 2.0 * (cost - cost0)
         points.append(ProfilePoint(value=value, theta=x_new, deviance=dev, cov=cov,
