@@ -1,12 +1,15 @@
 """Benchmark of the profile-likelihood fits (issue 18): Jacobians per point, time of the profile stage and
-the fits' accuracy, for three settings of the fits, on ``bench_scale.py``'s synthetic data sets:
+the fits' accuracy, for four settings of the fits, on ``bench_scale.py``'s synthetic data sets:
 
 * ``far, cost stop``: Levenberg–Marquardt started at the far-start damping (``leastsq.MU_FAR``, 10⁻³), stopped
   when a step lowers the deviance by less than ``profile.DEVIANCE_TOL``, the point's covariance from one more
   Jacobian (every fit before stop 39);
 * ``near, cost stop``: the same from the near-start damping (``MU_NEAR``, 10⁻⁶: stop 39);
 * ``near, decrement stop``: also stopped once the Gauss–Newton decrement is at most
-  ``profile.DECREMENT_TOL``, the covariance from the fit's last Jacobian (stop 40: the default).
+  ``profile.DECREMENT_TOL``, the covariance from the fit's last Jacobian (stop 40; since stop 42 also after a
+  cost stop, one small step before the point);
+* ``near, decrement stop, final step``: also stopped after one more step from a decrement at most
+  ``profile.FINAL_DECREMENT`` whose gain is as predicted (stop 42: the default).
 
 For each flight count: the data set, least squares, then the profile paths of the ten coefficients in one
 process, once per setting, in rotating order over ``--repeats`` rounds (times: medians). Printed per
@@ -60,7 +63,9 @@ class _Counted:
 
 SETTINGS = {"far, cost stop": dict(mu0=leastsq.MU_FAR, dtol=0.0),
             "near, cost stop": dict(mu0=leastsq.MU_NEAR, dtol=0.0),
-            "near, decrement stop": dict(mu0=leastsq.MU_NEAR, dtol=profile.DECREMENT_TOL)}
+            "near, decrement stop": dict(mu0=leastsq.MU_NEAR, dtol=profile.DECREMENT_TOL, final=0.0),
+            "near, decrement stop, final step": dict(mu0=leastsq.MU_NEAR, dtol=profile.DECREMENT_TOL,
+                                                     final=profile.FINAL_DECREMENT)}
 
 
 def deviance_errors(problem, ls, paths, cost0: float) -> np.ndarray:

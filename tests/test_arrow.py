@@ -143,7 +143,7 @@ def test_new_solver_matches_the_dense_optimum_and_covariance(small_problem):
     assert out["noise"] == {f"sigma_{f.name}": {"value": s, "unit": "m"} for f, s in zip(p.flights, ls.sigma)}
 
 
-def test_profile_fits_started_near_the_optimum_reach_it(small_problem):
+def test_profile_fits_started_near_the_optimum_reach_it(small_problem, monkeypatch):
     """A profile point's fit (:func:`profile._fixed_fit`, little initial damping: ``MU_NEAR``) ends within the
     deviance tolerance of the constrained optimum found by a tight fit, for a point one and three sds out; and
     refitting a converged optimum with ``MU_NEAR`` stays there."""
@@ -157,10 +157,21 @@ def test_profile_fits_started_near_the_optimum_reach_it(small_problem):
     for index in (1, 7):                                   # CLa and CMq
         for t in (1.0, -3.0):
             value = best.x[index] + t * np.sqrt(cov[index, index])
-            x, cost, ok, J = profile._fixed_fit(p, sigma, best.x, cov, index, value, 40, best.cost)
+            fits = []
+            with monkeypatch.context() as m:
+                m.setattr(profile, "minimise", lambda *a, **k: fits.append(minimise(*a, **k)) or fits[-1])
+                x, cost, ok, J = profile._fixed_fit(p, sigma, best.x, cov, index, value, 40, best.cost)
             assert ok and x[index] == value
-            # the Jacobian it hands back (the fit's own when it stopped on the decrement) is the point's
-            np.testing.assert_allclose(J.dense(), jacobian_blocks(x, p, sigma).dense(), rtol=0, atol=1e-12)
+            # the Jacobian it hands back is the fit's last: at the point, or (a cost stop, status 3, or the final
+            # step, 5) one step before it, within the final step's reach of the point
+            (res,) = fits
+            np.testing.assert_allclose(J.dense(), jacobian_blocks(res.jacobian_x, p, sigma).dense(), rtol=0, atol=1e-12)
+            if res.status in (3, 5):
+                assert res.njev >= 1 and not np.array_equal(res.jacobian_x, x)
+                r = whitened_residuals(res.jacobian_x, p, sigma)
+                assert 0.0 < 0.5 * float(r @ r) - cost <= profile.FINAL_DECREMENT + profile.DECREMENT_TOL
+            else:
+                np.testing.assert_array_equal(res.jacobian_x, x)
             free = np.ones(p.dim, bool)
             free[index] = False
             tight = minimise(p, x, sigma, free=free, max_nfev=200, xtol=1e-13, ftol=1e-13)
@@ -248,3 +259,24 @@ def test_jacobian_columns_that_bend_over_the_step_are_recomputed_with_smaller_st
     central = (np.sin(omega * (x[0] + h) * problem.t) - np.sin(omega * (x[0] - h) * problem.t)) / (2 * h) / sigma[0]
     error = np.abs(central - problem.exact(x, sigma)[0][:, 0]).max() / np.abs(problem.exact(x, sigma)[0][:, 0]).max()
     assert (error < 1e-6) if omega == 1.0 else (error > 0.3)
+
+
+def test_a_final_step_ends_a_fit_near_its_optimum_without_another_jacobian(small_problem):
+    """From a start whose Gauss–Newton decrement is between ``dtol`` and ``final_step``, the fit takes one step
+    and stops (status 5) with the start's Jacobian; without ``final_step`` it computes another. Both end within
+    ``dtol`` of the optimum."""
+    p = small_problem
+    sigma = p.nominal_noise
+    best = minimise(p, p.start_vector(), sigma, max_nfev=200, xtol=1e-13, ftol=1e-13)
+    cov = jacobian_blocks(best.x, p, sigma).information().inverse()
+    z = np.random.default_rng(5).normal(size=p.dim)
+    x0 = best.x + np.linalg.cholesky(cov) @ (z * np.sqrt(2 * 1e-3) / np.linalg.norm(z))   # decrement ≈ 10⁻³
+    dtol, final = 2.5e-4, 2.5e-3
+    plain = minimise(p, x0, sigma, mu0=MU_NEAR, dtol=dtol, keep_jacobian=True)
+    short = minimise(p, x0, sigma, mu0=MU_NEAR, dtol=dtol, keep_jacobian=True, final_step=final)
+    assert plain.status == 4 and plain.njev == 2
+    assert short.status == 5 and short.njev == 1 and short.nfev == 2
+    np.testing.assert_array_equal(short.jacobian_x, x0)
+    np.testing.assert_allclose(short.jacobian.dense(), jacobian_blocks(x0, p, sigma).dense(), rtol=0, atol=1e-12)
+    for res in (plain, short):
+        assert 0.0 <= res.cost - best.cost <= dtol

@@ -159,14 +159,15 @@ class ArrowMatrix:
         Si = _pinv_sym(S)
         out = np.zeros((self.n, self.n))
         out[np.ix_(self.shared, self.shared)] = Si
-        G = [Cinv @ B.T for B, Cinv in zip(Hs.B, Ci)]      # C_k⁻¹ B_kᵀ   (p_k, s)
-        for o, Gk, Cinv in zip(self.own, G, Ci):
-            cross = -Si @ Gk.T                            # (s, p_k)
-            out[np.ix_(self.shared, o)] = cross
-            out[np.ix_(o, self.shared)] = cross.T
-            for o2, G2 in zip(self.own, G):
-                out[np.ix_(o, o2)] = Gk @ Si @ G2.T
-            out[np.ix_(o, o)] += Cinv
+        if self.own:
+            own = np.concatenate(self.own)
+            G = np.concatenate([Cinv @ B.T for B, Cinv in zip(Hs.B, Ci)])   # C_k⁻¹ B_kᵀ stacked   (Σp_k, s)
+            cross = -Si @ G.T                                                # (s, Σp_k)
+            out[np.ix_(self.shared, own)] = cross
+            out[np.ix_(own, self.shared)] = cross.T
+            out[np.ix_(own, own)] = G @ Si @ G.T                             # every (k, l) pair at once
+            for o, Cinv in zip(self.own, Ci):
+                out[np.ix_(o, o)] += Cinv
         return out / np.outer(d, d)
 
     def condition_number(self) -> float:

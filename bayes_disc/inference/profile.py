@@ -60,6 +60,17 @@ DEVIANCE_TOL = 1e-3
 #: of the 24-flight benchmark ended over DEVIANCE_TOL short of a tight refit (max 1.8·10⁻³); with ¼ of it, max
 #: 9.2·10⁻⁴ and 3.5 Jacobians per point instead of 4.1 (``benchmarks/bench_profile_fits.py``)
 DECREMENT_TOL = 0.25 * DEVIANCE_TOL
+#: a profile fit whose Gauss–Newton decrement is at most this (cost units; deviance 5·10⁻³) takes one more step
+#: and stops there if the step gains what the model predicted, to DECREMENT_TOL (:func:`.leastsq.minimise`'s
+#: ``final_step``); the point's covariance is then the Jacobian's one step before. With many flights the
+#: Gauss–Newton iteration converges linearly near a profile point (decrements ×0.3–0.6 per Jacobian on 24 flights,
+#: ×10⁻³ on 4: the residual curvature it drops grows with the ridges), so the last Jacobians bought digits no
+#: verdict reads. Seed 19 of ``benchmarks/bench_scale.py``, the ten coefficients, one process
+#: (``benchmarks/bench_profile_fits.py``): Jacobians per point 2.91 → 2.35 at 24 flights (2.51 → 2.40 at 4), the
+#: stage 21.3 → 16.2 s; the deviances' shortfall against a tight refit max 2.0 → 4.1·10⁻³ (90 %: 1.0 → 1.3·10⁻³;
+#: unchanged at 4 flights); the covariance one step away: sds within 0.9 %, ½ ln|S| (the Laplace marginal's
+#: volume) within 0.29 on CL0, CRr, CMa and CMq's paths
+FINAL_DECREMENT = 10.0 * DECREMENT_TOL
 #: a point whose deviance exceeds this multiple of the stopping deviance is a failed fit or a cliff: it
 #: still bounds the profile but is not ``ok`` (not used as a posterior approximation)
 FAILED_DEVIANCE_FACTOR = 4.0
@@ -276,9 +287,10 @@ def bent_start(x: np.ndarray, cov: np.ndarray, index: int, value: float, miss: n
 
 def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, cov0: np.ndarray, index: int, value: float,
                max_nfev: int, cost0: float, mu0: float = MU_NEAR, dtol: float = DECREMENT_TOL,
-               bent: np.ndarray | None = None):
+               bent: np.ndarray | None = None, final: float = FINAL_DECREMENT):
     """Optimum of every parameter but ``index`` (held at ``value``): (θ*, cost, converged, J), J the whitened
-    Jacobian over every parameter at θ* (:class:`.arrow.ArrowJacobian`, for the point's covariance).
+    Jacobian over every parameter (:class:`.arrow.ArrowJacobian`, for the point's covariance) at θ* or one
+    small step before it.
 
     The fit starts from the best (lowest cost) of x0 with θ_i set to ``value``, :func:`conditional_start`
     (x0, cov0) and, when given, ``bent`` (:func:`bent_start`): on the 24-flight benchmark the conditional start
@@ -288,10 +300,12 @@ def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, cov0: np.nda
     are next to the constrained optimum, so the fit starts with little damping ``mu0``
     (:data:`.leastsq.MU_NEAR`: 3.0–3.1 Jacobians per fit at 4–24 flights, against 4.2–6.6 with
     :data:`.leastsq.MU_FAR`). It stops when the Gauss–Newton decrement (the cost decrease its quadratic model
-    still expects) is at most ``dtol`` — the Jacobian there is the point's own, so none is computed twice —
-    or when a step lowers the deviance 2 Δcost by less than :data:`DEVIANCE_TOL` (``cost0``: the optimum's
-    cost, which turns it into the minimiser's relative tolerance); J is then computed at θ* (None after a
-    failed fit). ``dtol`` = 0: the second rule alone."""
+    still expects) is at most ``dtol`` — the Jacobian there is the point's own, so none is computed twice —;
+    after one more step from a decrement at most ``final`` whose gain is as predicted (to ``dtol``); and
+    when a step lowers the deviance 2 Δcost by less than :data:`DEVIANCE_TOL` (``cost0``: the optimum's cost,
+    which turns it into the minimiser's relative tolerance). In these last two cases J is the fit's last
+    Jacobian, one small step before θ* (:data:`FINAL_DECREMENT`). J is None after a failed fit. ``dtol`` = 0:
+    the last rule alone, J computed at θ*."""
     free = np.ones(x0.size, bool)
     free[index] = False
     held = x0.copy()
@@ -301,16 +315,17 @@ def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, cov0: np.nda
     x = starts[int(np.argmin(costs))]
     ftol = 0.5 * DEVIANCE_TOL / max(cost0, 1e-300)
     res = minimise(problem, x, sigma, free=free, max_nfev=max_nfev, ftol=ftol, mu0=mu0, dtol=dtol,
-                   keep_jacobian=dtol > 0)
+                   keep_jacobian=dtol > 0, final_step=final if dtol > 0 else 0.0)
     ok = res.status > 0
-    J = res.jacobian if res.jacobian is not None or not ok else jacobian_blocks(res.x, problem, sigma)
+    J = None if not ok else res.jacobian if res.jacobian is not None else jacobian_blocks(res.x, problem, sigma)
     return res.x, float(res.cost), ok, J
 
 
 def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov_hat: np.ndarray, index: int,
                  side: float, max_deviance: float = MAX_DEVIANCE, max_points: int = MAX_POINTS,
                  max_nfev: int = 40, extended_points: int = EXTENDED_POINTS,
-                 mu0: float = MU_NEAR, dtol: float = DECREMENT_TOL) -> list[ProfilePoint]:
+                 mu0: float = MU_NEAR, dtol: float = DECREMENT_TOL,
+                 final: float = FINAL_DECREMENT) -> list[ProfilePoint]:
     """The points on one side (``side`` = +1: values above θ̂_i, −1: below) of parameter ``index``'s profile
     through the least-squares optimum ``theta_hat`` (noise ``sigma``, covariance ``cov_hat``).
 
@@ -340,7 +355,8 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
     for k in range(max(max_points, extended_points)):
         value = float(x[index] + side * step)
         bent = None if miss is None else bent_start(x, cov, index, value, miss, step / last_step)
-        x_new, cost, ok, J = _fixed_fit(problem, sigma, x, cov, index, value, max_nfev, cost0, mu0, dtol, bent)
+        x_new, cost, ok, J = _fixed_fit(problem, sigma, x, cov, index, value, max_nfev, cost0, mu0, dtol, bent,
+                                        final)
         if not (ok and np.isfinite(cost)):
             break
         miss, last_step = x_new - conditional_start(x, cov, index, value), step
