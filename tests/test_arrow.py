@@ -8,9 +8,9 @@ from scipy.optimize import least_squares
 from bayes_disc.inference.arrow import ArrowJacobian
 from bayes_disc.inference.initial import initial_state_from_data
 from bayes_disc.inference import profile
-from bayes_disc.inference.leastsq import (MU_NEAR, START_DECREMENT, covariance_from_jacobian, decrement,
-                                          jacobian_blocks, minimise, refine_least_squares, whitened_jacobian,
-                                          whitened_residuals, _rms)
+from bayes_disc.inference.leastsq import (FAILED_RESIDUAL, MU_NEAR, START_DECREMENT, covariance_from_jacobian,
+                                          decrement, jacobian_blocks, minimise, refine_least_squares,
+                                          whitened_costs, whitened_jacobian, whitened_residuals, _rms)
 from bayes_disc.inference.model import Problem
 from bayes_disc.observation.synth import DEFAULT_MARKERS, LaunchSpec, SynthSpec, synthesize
 
@@ -280,3 +280,18 @@ def test_a_final_step_ends_a_fit_near_its_optimum_without_another_jacobian(small
     np.testing.assert_allclose(short.jacobian.dense(), jacobian_blocks(x0, p, sigma).dense(), rtol=0, atol=1e-12)
     for res in (plain, short):
         assert 0.0 <= res.cost - best.cost <= dtol
+
+
+def test_batched_costs_are_each_points_own(small_problem):
+    """:func:`whitened_costs` of several points (one simulation per flight) equals each point's
+    ½ |:func:`whitened_residuals`|², a point whose simulation fails (a launch faster than the speed cap)
+    included."""
+    p = small_problem
+    sigma = p.nominal_noise
+    x = p.start_vector()
+    X = np.array([x, x + 1e-3 * p.prior_sd, x.copy()])
+    X[2, p.ic_start + 3] = 1e3                                           # flight a's vx [m/s]
+    one = [0.5 * float(np.sum(np.square(whitened_residuals(z, p, sigma)))) for z in X]
+    np.testing.assert_allclose(whitened_costs(X, p, sigma), one, rtol=1e-12)
+    n_a = p.noise_residuals(x[None], 0)[0].shape[1]
+    assert one[2] >= 0.5 * n_a * FAILED_RESIDUAL ** 2                   # flight a failed

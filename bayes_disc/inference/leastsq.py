@@ -128,6 +128,33 @@ def flight_residuals(x: np.ndarray, problem: Problem, sigma: np.ndarray) -> list
     return parts
 
 
+def whitened_costs(X: np.ndarray, problem: Problem, sigma: np.ndarray) -> np.ndarray:
+    """½ |whitened residuals|² of several points at once: one batched simulation per flight.
+
+    Parameters
+    ----------
+    X : (B, dim) array
+        Points.
+    problem : Problem
+    sigma : (n_groups,) array
+        Noise scale per group.
+
+    Returns
+    -------
+    (B,) array
+        Each point's ½ Σ r² of :func:`whitened_residuals` (a flight whose simulation failed counts its
+        residuals as FAILED_RESIDUAL).
+    """
+    X = np.atleast_2d(X)
+    out = 0.5 * np.sum(np.square((X - problem.prior_mean) / problem.prior_sd), axis=1)
+    for k in range(problem.n_flights):
+        r, ok = problem.noise_residuals(X, k)
+        r = r / sigma[problem.residual_groups(k)]
+        good = ok & np.all(np.isfinite(r), axis=1)
+        out += 0.5 * np.sum(np.square(np.where(good[:, None], r, FAILED_RESIDUAL)), axis=1)
+    return out
+
+
 def whitened_residuals(x: np.ndarray, problem: Problem, sigma: np.ndarray) -> np.ndarray:
     """Every flight's effective residuals (:meth:`Problem.noise_residuals`) divided by their group's σ, then
     the prior's standardised deviations: ½ |·|² is the negative log-posterior with σ fixed."""

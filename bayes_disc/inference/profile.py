@@ -38,7 +38,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..physics.parallel import mp_context
-from .leastsq import MU_NEAR, LeastSquaresResult, jacobian_blocks, minimise, refit_from_lower, whitened_residuals
+from .leastsq import (MU_NEAR, LeastSquaresResult, jacobian_blocks, minimise, refit_from_lower, whitened_costs,
+                      whitened_residuals)
 from .model import Problem
 
 #: the path stops past this profile deviance (≈ 3.5 σ for a Gaussian)
@@ -311,8 +312,7 @@ def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, cov0: np.nda
     held = x0.copy()
     held[index] = value
     starts = [held, conditional_start(x0, cov0, index, value)] + ([bent] if bent is not None else [])
-    costs = [0.5 * float(np.sum(np.square(whitened_residuals(z, problem, sigma)))) for z in starts]
-    x = starts[int(np.argmin(costs))]
+    x = starts[int(np.argmin(whitened_costs(np.array(starts), problem, sigma)))]
     ftol = 0.5 * DEVIANCE_TOL / max(cost0, 1e-300)
     res = minimise(problem, x, sigma, free=free, max_nfev=max_nfev, ftol=ftol, mu0=mu0, dtol=dtol,
                    keep_jacobian=dtol > 0, final_step=final if dtol > 0 else 0.0)
