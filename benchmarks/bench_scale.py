@@ -115,6 +115,7 @@ def one_case(n: int, seed: int, sampler: str, dense: bool, tmp: Path) -> dict:
     proposal, ls = posterior_approximation(problem, ls, cfg.sampler.processes, out)
     row["profiles_s"] = time.perf_counter() - t0
     row["lower_optima"] = len(ls.lower_optima)
+    row["profile_points"] = sum(len(r["t"]) - 1 for r in json.loads((out / "profiles.json").read_text()).values())
     t0 = time.perf_counter()
     chains = run_sampler(problem, proposal, cfg.sampler, out, progress=False)
     row["sampling_s"] = time.perf_counter() - t0
@@ -165,8 +166,8 @@ def main(argv=None) -> int:
                 refits = (f" (least squares refitted {row['lower_optima']}× from a lower point on a profile)"
                           if row["lower_optima"] else "")
                 print(f"{n:3d} flights ({row['dim']} parameters, {row['walkers']} walkers): least squares "
-                      f"{row['least_squares_s']:.1f} s{dense}; profiles {row['profiles_s']:.1f} s"
-                      f"{refits}; sampling "
+                      f"{row['least_squares_s']:.1f} s{dense}; profiles {row['profiles_s']:.1f} s "
+                      f"({row['profile_points']} points){refits}; sampling "
                       f"{row['sampling_s']:.1f} s ({row['steps']} steps, converged {row['converged']}, R-hat "
                       f"{row['rhat_max']:.4f}, ESS {row['ess_min_coef']:.0f}, N/τ {row['n_over_tau']:.1f}, τ max coefficients "
                       f"{row['tau_max_coefficients']:.1f} / initial conditions {row['tau_max_initial_conditions']:.1f} steps, "

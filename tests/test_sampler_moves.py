@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
 
-from bayes_disc.inference.proposals import MixtureProposal
+from bayes_disc.inference.proposals import EIGENVALUE_FLOOR, MixtureProposal, scaled_cholesky
 
 
 def _mixture():
@@ -478,3 +478,24 @@ def test_block_sparse_ridge_algebra_equals_the_dense_one():
     plain = RidgeProposal.from_path(t, SimpleNamespace(index=1, points=pts))
     np.testing.assert_allclose(built.chols, plain.chols, atol=1e-12 * np.abs(plain.chols).max())
     assert np.all(built.chols[:, ~mask] == 0)
+
+
+def test_scaled_cholesky_factors_directly_where_the_floor_cannot_bind():
+    """A well-conditioned covariance with scales from 1e−7 to 1 is factored as it is; a rank-deficient one gets
+    the floored eigenvalues, the same as factoring the floored matrix itself."""
+    rng = np.random.default_rng(11)
+    n = 40
+    A = rng.normal(size=(n, n))
+    scales = 10.0 ** rng.uniform(-7, 0, n)
+    cov = (A @ A.T / n + 0.1 * np.eye(n)) * np.outer(scales, scales)
+    L = scaled_cholesky(cov)
+    np.testing.assert_allclose(L, np.tril(L))
+    np.testing.assert_allclose(L @ L.T / np.outer(scales, scales), cov / np.outer(scales, scales), atol=1e-12)
+    B = rng.normal(size=(n, 3))
+    low = (B @ B.T) * np.outer(scales, scales)                      # rank 3: the floor binds
+    d = np.sqrt(np.diag(low))
+    w, V = np.linalg.eigh(low / np.outer(d, d))
+    floored = (V * np.maximum(w, EIGENVALUE_FLOOR * w.max())) @ V.T
+    L = scaled_cholesky(low)
+    np.testing.assert_allclose(L @ L.T / np.outer(d, d), floored, atol=1e-9)
+    assert np.linalg.eigvalsh(L @ L.T / np.outer(d, d)).min() > 0.5 * EIGENVALUE_FLOOR * w.max()
