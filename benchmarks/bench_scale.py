@@ -115,7 +115,8 @@ def one_case(n: int, seed: int, sampler: str, dense: bool, tmp: Path) -> dict:
     proposal, ls = posterior_approximation(problem, ls, cfg.sampler.processes, out)
     row["profiles_s"] = time.perf_counter() - t0
     row["lower_optima"] = len(ls.lower_optima)
-    row["profile_points"] = sum(len(r["t"]) - 1 for r in json.loads((out / "profiles.json").read_text()).values())
+    paths = json.loads((out / "profiles.json").read_text())
+    row["profile_points"] = sum(len(r["t"]) - 1 for r in paths.values())            # the optimum not counted
     t0 = time.perf_counter()
     chains = run_sampler(problem, proposal, cfg.sampler, out, progress=False)
     row["sampling_s"] = time.perf_counter() - t0

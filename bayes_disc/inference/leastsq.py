@@ -406,7 +406,6 @@ def minimise(problem: Problem, x0: np.ndarray, sigma: np.ndarray, free: np.ndarr
                    jacobian_x=J_x if J_all is not None else None)
 
 
-
 #: bounds of the step-length factor of :func:`step_length`
 STEP_LENGTH_BOUNDS = (0.1, 4.0)
 #: :func:`step_length` proposes a factor only when it differs from 1 by more than this

@@ -63,7 +63,7 @@ DEVIANCE_TOL = 1e-3
 DECREMENT_TOL = 0.25 * DEVIANCE_TOL
 #: a profile fit whose Gauss–Newton decrement is at most this (cost units; deviance 5·10⁻³) takes one more step
 #: and stops there if the step gains what the model predicted, to DECREMENT_TOL (:func:`.leastsq.minimise`'s
-#: ``final_step``); the point's covariance is then the Jacobian's one step before. With many flights the
+#: ``final_step``); the point's covariance then comes from the Jacobian one step before it. With many flights the
 #: Gauss–Newton iteration converges linearly near a profile point (decrements ×0.3–0.6 per Jacobian on 24 flights,
 #: ×10⁻³ on 4: the residual curvature it drops grows with the ridges), so the last Jacobians bought digits no
 #: verdict reads. Seed 19 of ``benchmarks/bench_scale.py``, the ten coefficients, one process
