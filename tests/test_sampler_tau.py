@@ -100,6 +100,10 @@ def test_check_on_stored_chains_reads_blocks_and_gives_the_in_memory_verdict(tmp
     stored = sampler.convergence(sampler.StoredChains(paths, start=20), settings, coef, first_step=20)
     assert max(reads) == 4 and sum(reads) == 2 * dim                 # two passes, never the whole chain
     assert whole["rhat_max"] > 1.01                                  # the offset ensemble is seen
-    for key in ("burn", "n_over_tau", "rhat_max", "ess_min_coef", "converged"):
+    for key in ("burn", "n_over_tau", "rhat_max", "rhat_max_coef", "ess_min_coef", "converged"):
         assert stored[key] == pytest.approx(whole[key], rel=1e-12), key
     np.testing.assert_allclose(stored["tau"], whole["tau"], rtol=1e-12)
+    # the coefficients' R-hat alone: the largest of theirs after the burn-in, below every parameter's largest here
+    rh = sampler.rhat_across(chains[:, whole["burn"]:])
+    assert whole["rhat_max"] == pytest.approx(rh.max(), rel=1e-12)
+    assert whole["rhat_max_coef"] == pytest.approx(rh[coef].max(), rel=1e-12) and rh[coef].max() < rh.max()

@@ -440,7 +440,8 @@ def convergence(chain, settings: SamplerSettings, coef_idx: np.ndarray, first_st
     -------
     dict
         ``burn`` (absolute step: the warm-up and at least 5 τ after it, at most half of what follows it),
-        ``tau`` (n_ens, dim), ``n_over_tau``, ``rhat_max``, ``ess_min_coef``, ``converged``. Every statistic
+        ``tau`` (n_ens, dim), ``n_over_tau``, ``rhat_max`` (every parameter; the rule's), ``rhat_max_coef``
+        (the coefficients'), ``ess_min_coef``, ``converged``. Every statistic
         is computed per parameter, in blocks of at most :data:`CHECK_BLOCK` parameters and
         :data:`CHECK_VALUES` draws (``settings.processes`` blocks at once, in threads: the sampling
         processes wait during a check), so memory stays bounded as the chains grow: two passes over the
@@ -474,7 +475,8 @@ def convergence(chain, settings: SamplerSettings, coef_idx: np.ndarray, first_st
     ok = (first_step + n >= settings.min_steps and n_over_tau >= settings.n_tau and np.all(rh < settings.rhat)
           and np.all(ess >= settings.ess))
     return {"burn": first_step + skip, "tau": tau, "n_over_tau": float(n_over_tau), "rhat_max": float(np.max(rh)),
-            "ess_min_coef": float(np.min(ess)), "converged": bool(ok)}
+            "rhat_max_coef": float(np.max(rh[coef], initial=-np.inf)), "ess_min_coef": float(np.min(ess)),
+            "converged": bool(ok)}
 
 
 @dataclass(frozen=True)
