@@ -165,7 +165,8 @@ def test_profile_fits_started_near_the_optimum_reach_it(small_problem, monkeypat
             # the Jacobian it hands back is the fit's last: at the point, or (a cost stop, status 3, or the final
             # step, 5) one step before it, within the final step's reach of the point
             (res,) = fits
-            np.testing.assert_allclose(J.dense(), jacobian_blocks(res.jacobian_x, p, sigma).dense(), rtol=0, atol=1e-12)
+            np.testing.assert_allclose(J.dense(), jacobian_blocks(res.jacobian_x, p, sigma).dense(), rtol=0,
+                                       atol=1e-12)
             if res.status in (3, 5):
                 assert res.njev >= 1 and not np.array_equal(res.jacobian_x, x)
                 r = whitened_residuals(res.jacobian_x, p, sigma)

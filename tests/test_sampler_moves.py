@@ -480,15 +480,18 @@ def test_block_sparse_ridge_algebra_equals_the_dense_one():
     assert np.all(built.chols[:, ~mask] == 0)
 
 
-def test_scaled_cholesky_factors_directly_where_the_floor_cannot_bind():
-    """A well-conditioned covariance with scales from 1e−7 to 1 is factored as it is; a rank-deficient one gets
-    the floored eigenvalues, the same as factoring the floored matrix itself."""
+def test_scaled_cholesky_factors_directly_where_the_floor_cannot_bind(monkeypatch):
+    """A well-conditioned covariance with scales from 1e−7 to 1 is factored as it is, without an
+    eigendecomposition; a rank-deficient one gets the floored eigenvalues, the same as factoring the floored
+    matrix itself."""
     rng = np.random.default_rng(11)
     n = 40
     A = rng.normal(size=(n, n))
     scales = 10.0 ** rng.uniform(-7, 0, n)
     cov = (A @ A.T / n + 0.1 * np.eye(n)) * np.outer(scales, scales)
-    L = scaled_cholesky(cov)
+    with monkeypatch.context() as m:
+        m.setattr(np.linalg, "eigh", lambda *a, **k: pytest.fail("eigendecomposition of a well-conditioned matrix"))
+        L = scaled_cholesky(cov)
     np.testing.assert_allclose(L, np.tril(L))
     np.testing.assert_allclose(L @ L.T / np.outer(scales, scales), cov / np.outer(scales, scales), atol=1e-12)
     B = rng.normal(size=(n, 3))
