@@ -118,14 +118,18 @@ def _flight_columns(x: np.ndarray, problem: Problem, sigma: np.ndarray, k: int, 
     return d, bend, slope, centre
 
 
+def _flight_whitened(X: np.ndarray, problem: Problem, sigma: np.ndarray, k: int) -> np.ndarray:
+    """Flight k's whitened effective residuals (B, n_k) of the points X (B, dim), one batched simulation; a
+    point whose simulation failed (or gave a non-finite residual) has every residual FAILED_RESIDUAL."""
+    r, ok = problem.noise_residuals(X, k)
+    r = r / sigma[problem.residual_groups(k)]
+    good = ok & np.all(np.isfinite(r), axis=1)
+    return np.where(good[:, None], r, FAILED_RESIDUAL)
+
+
 def flight_residuals(x: np.ndarray, problem: Problem, sigma: np.ndarray) -> list[np.ndarray]:
     """Every flight's whitened effective residuals (n_k,) at x (FAILED_RESIDUAL where its simulation failed)."""
-    parts = []
-    for k in range(problem.n_flights):
-        r, ok = problem.noise_residuals(x[None], k)
-        r = r[0] / sigma[problem.residual_groups(k)]
-        parts.append(r if ok[0] and np.all(np.isfinite(r)) else np.full(r.shape, FAILED_RESIDUAL))
-    return parts
+    return [_flight_whitened(x[None], problem, sigma, k)[0] for k in range(problem.n_flights)]
 
 
 def whitened_costs(X: np.ndarray, problem: Problem, sigma: np.ndarray) -> np.ndarray:
@@ -148,10 +152,7 @@ def whitened_costs(X: np.ndarray, problem: Problem, sigma: np.ndarray) -> np.nda
     X = np.atleast_2d(X)
     out = 0.5 * np.sum(np.square((X - problem.prior_mean) / problem.prior_sd), axis=1)
     for k in range(problem.n_flights):
-        r, ok = problem.noise_residuals(X, k)
-        r = r / sigma[problem.residual_groups(k)]
-        good = ok & np.all(np.isfinite(r), axis=1)
-        out += 0.5 * np.sum(np.square(np.where(good[:, None], r, FAILED_RESIDUAL)), axis=1)
+        out += 0.5 * np.sum(np.square(_flight_whitened(X, problem, sigma, k)), axis=1)
     return out
 
 
@@ -311,7 +312,7 @@ def minimise(problem: Problem, x0: np.ndarray, sigma: np.ndarray, free: np.ndarr
     final_step : float
         Decrement (units of the cost) at or below which one more step ends the fit (status 5) without a
         Jacobian at its end, if the cost it gains is within ``dtol`` of the gain the model predicted (else
-        the fit goes on as usual); 0 (default): not used; only with ``dtol`` > 0. Where Gauss–Newton
+        the fit goes on as usual); 0 (default): not used; ignored unless ``dtol`` > 0. Where Gauss–Newton
         converges linearly (the residual curvature Σ r ∇²r it drops is large: profile fits on 24 flights,
         decrements falling ×0.3–0.6 per Jacobian), each further step costs a Jacobian for a gain below the
         digits the caller reads; the final step costs one residual evaluation.
@@ -353,7 +354,7 @@ def minimise(problem: Problem, x0: np.ndarray, sigma: np.ndarray, free: np.ndarr
             if np.max(np.abs(g * sd), initial=0.0) < GTOL:
                 status, message = 1, "gradient below tolerance"
                 break
-            if dtol > 0.0 or final_step > 0.0:
+            if dtol > 0.0:
                 gain = decrement(H, g)
                 if gain <= dtol:
                     status, message = 4, "decrement below tolerance"

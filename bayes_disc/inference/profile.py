@@ -38,8 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..physics.parallel import mp_context
-from .leastsq import (MU_NEAR, LeastSquaresResult, jacobian_blocks, minimise, refit_from_lower, whitened_costs,
-                      whitened_residuals)
+from .leastsq import MU_NEAR, LeastSquaresResult, jacobian_blocks, minimise, refit_from_lower, whitened_costs
 from .model import Problem
 
 #: the path stops past this profile deviance (≈ 3.5 σ for a Gaussian)
@@ -315,7 +314,7 @@ def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, cov0: np.nda
     x = starts[int(np.argmin(whitened_costs(np.array(starts), problem, sigma)))]
     ftol = 0.5 * DEVIANCE_TOL / max(cost0, 1e-300)
     res = minimise(problem, x, sigma, free=free, max_nfev=max_nfev, ftol=ftol, mu0=mu0, dtol=dtol,
-                   keep_jacobian=dtol > 0, final_step=final if dtol > 0 else 0.0)
+                   keep_jacobian=dtol > 0, final_step=final)
     ok = res.status > 0
     J = None if not ok else res.jacobian if res.jacobian is not None else jacobian_blocks(res.x, problem, sigma)
     return res.x, float(res.cost), ok, J
@@ -345,8 +344,7 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
     list of ProfilePoint
         In the order they were fitted (moving away from θ̂); the optimum itself is not among them.
     """
-    r0 = whitened_residuals(theta_hat, problem, sigma)
-    cost0 = 0.5 * float(r0 @ r0)
+    cost0 = float(whitened_costs(theta_hat, problem, sigma)[0])
     sd0 = float(np.sqrt(cov_hat[index, index]))
     volume0 = conditional_log_volume(cov_hat, index)
     points: list[ProfilePoint] = []

@@ -475,7 +475,7 @@ def convergence(chain, settings: SamplerSettings, coef_idx: np.ndarray, first_st
     ok = (first_step + n >= settings.min_steps and n_over_tau >= settings.n_tau and np.all(rh < settings.rhat)
           and np.all(ess >= settings.ess))
     return {"burn": first_step + skip, "tau": tau, "n_over_tau": float(n_over_tau), "rhat_max": float(np.max(rh)),
-            "rhat_max_coef": float(np.max(rh[coef], initial=-np.inf)), "ess_min_coef": float(np.min(ess)),
+            "rhat_max_coef": float(np.max(rh[coef])), "ess_min_coef": float(np.min(ess)),
             "converged": bool(ok)}
 
 
