@@ -7,7 +7,10 @@ for is timed in this process:
 
 * least squares (``fit_least_squares``: the block-arrow Levenberg–Marquardt, the configured starts) and,
   for comparison on the same data, one start of scipy's dense trust-region fit (the solver used before);
-* the profile likelihoods of the coefficients and the independence proposal built from them;
+* the profile likelihoods of the coefficients and the independence proposal built from them; also their
+  work, which does not depend on the machine's speed: the Jacobians and residual evaluations of the final
+  paths' fits (``profiles.json``), each one batched simulation per flight, so the stage's simulation work is
+  linear in the flights where these counts stay level;
 * sampling to the stopping rule (R-hat < 1.01, bulk ESS ≥ 400 for every coefficient, N/τ ≥ 10, at least
   ``min_steps``) or the cap; also reported, the time to the first convergence check that met R-hat < 1.01
   for every parameter and bulk ESS ≥ 400 for every coefficient (``rhat_ess_total_s``, from the check's
@@ -120,6 +123,8 @@ def one_case(n: int, seed: int, sampler: str, dense: bool, tmp: Path) -> dict:
     row["lower_optima"] = len(ls.lower_optima)
     paths = json.loads((out / "profiles.json").read_text())
     row["profile_points"] = sum(len(r["t"]) - 1 for r in paths.values())            # the optimum not counted
+    row["profile_jacobians"] = sum(sum(r["jacobians"]) for r in paths.values())
+    row["profile_evaluations"] = sum(sum(r["evaluations"]) for r in paths.values())
     t0 = time.perf_counter()
     chains = run_sampler(problem, proposal, cfg.sampler, out, progress=False)
     row["sampling_s"] = time.perf_counter() - t0
@@ -174,7 +179,8 @@ def main(argv=None) -> int:
                           if row["lower_optima"] else "")
                 print(f"{n:3d} flights ({row['dim']} parameters, {row['walkers']} walkers): least squares "
                       f"{row['least_squares_s']:.1f} s{dense}; profiles {row['profiles_s']:.1f} s "
-                      f"({row['profile_points']} points){refits}; sampling "
+                      f"({row['profile_points']} points, {row['profile_jacobians']} Jacobians, "
+                      f"{row['profile_evaluations']} evaluations){refits}; sampling "
                       f"{row['sampling_s']:.1f} s ({row['steps']} steps, converged {row['converged']}, R-hat "
                       f"{row['rhat_max']:.4f}, ESS {row['ess_min_coef']:.0f}, N/τ {row['n_over_tau']:.1f}, τ max coefficients "
                       f"{row['tau_max_coefficients']:.1f} / initial conditions {row['tau_max_initial_conditions']:.1f} steps, "
@@ -192,7 +198,8 @@ def main(argv=None) -> int:
         print(f"\nratios to {base['flights']} flights:")
         for r in rows:
             q = r["ratio_to_first"]
-            print(f"{r['flights']:3d} flights: least squares ×{q['least_squares_s']:.2f}, profiles ×{q['profiles_s']:.2f}, "
+            print(f"{r['flights']:3d} flights: least squares ×{q['least_squares_s']:.2f}, profiles ×{q['profiles_s']:.2f} "
+                  f"(Jacobians ×{r['profile_jacobians'] / base['profile_jacobians']:.2f}), "
                   f"sampling ×{q['sampling_s']:.2f}, total ×{q['total_s']:.2f}, "
                   f"to R-hat and ESS alone ×{q['rhat_ess_total_s']:.2f}, to the coefficients' ×{q['coef_total_s']:.2f}")
     return 0

@@ -160,11 +160,13 @@ def test_profile_fits_started_near_the_optimum_reach_it(small_problem, monkeypat
             fits = []
             with monkeypatch.context() as m:
                 m.setattr(profile, "minimise", lambda *a, **k: fits.append(minimise(*a, **k)) or fits[-1])
-                x, cost, ok, J = profile._fixed_fit(p, sigma, best.x, cov, index, value, 40, best.cost)
-            assert ok and x[index] == value
+                fit = profile._fixed_fit(p, sigma, best.x, cov, index, value, 40, best.cost)
+            x, cost, J = fit.x, fit.cost, fit.J
+            assert fit.ok and x[index] == value
             # the Jacobian it hands back is the fit's last: at the point, or (a cost stop, status 3, or the final
             # step, 5) one step before it, within the final step's reach of the point
             (res,) = fits
+            assert fit.njev == res.njev and fit.nfev == res.nfev + 1       # its work, the batched starts included
             np.testing.assert_allclose(J.dense(), jacobian_blocks(res.jacobian_x, p, sigma).dense(), rtol=0,
                                        atol=1e-12)
             if res.status in (3, 5):

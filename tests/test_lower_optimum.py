@@ -41,9 +41,9 @@ def displaced():
     ls = refine_least_squares(p, minimise(p, p.start_vector(), p.nominal_noise, max_nfev=200).x)
     i = p.names.index("CL0")
     sd = np.sqrt(ls.cov[i, i])
-    x, _, ok, _ = profile._fixed_fit(p, ls.sigma, ls.theta, ls.cov, i, ls.theta[i] + 3 * sd, 100,
-                                     _cost(ls.theta, p, ls.sigma))
-    assert ok
+    fit = profile._fixed_fit(p, ls.sigma, ls.theta, ls.cov, i, ls.theta[i] + 3 * sd, 100, _cost(ls.theta, p, ls.sigma))
+    assert fit.ok
+    x = fit.x
     return p, ls, replace(ls, theta=x, cost=_cost(x, p, ls.sigma)), i
 
 
@@ -104,6 +104,11 @@ def test_the_least_squares_are_refitted_from_the_lower_point(displaced, tmp_path
     assert np.array_equal(np.load(tmp_path / "least_squares_theta.npy"), new.theta)
     profiles = json.loads((tmp_path / "profiles.json").read_text())
     assert min(min(r["deviance"]) for r in profiles.values()) > -LOWER_OPTIMUM_DEVIANCE
+    # each point's work: none at the optimum, at least one Jacobian (its covariance) and one evaluation elsewhere
+    for r in profiles.values():
+        assert len(r["jacobians"]) == len(r["evaluations"]) == len(r["t"])
+        for t, njev, nfev in zip(r["t"], r["jacobians"], r["evaluations"]):
+            assert (njev, nfev) == (0, 0) if t == 0 else (njev >= 1 and nfev >= 1)
 
 
 def test_identifiability_profiles_refit_a_least_squares_that_stopped_short(tmp_path, monkeypatch):
@@ -121,7 +126,7 @@ def test_identifiability_profiles_refit_a_least_squares_that_stopped_short(tmp_p
         ls = real(problem, **kwargs)
         i = problem.names.index("CL0")
         x = profile._fixed_fit(problem, ls.sigma, ls.theta, ls.cov, i, ls.theta[i] + 3 * np.sqrt(ls.cov[i, i]), 100,
-                               _cost(ls.theta, problem, ls.sigma))[0]
+                               _cost(ls.theta, problem, ls.sigma)).x
         held.update(lowest=ls, off=x)
         return replace(ls, theta=x, cost=_cost(x, problem, ls.sigma))
     monkeypatch.setattr(diag_run, "fit_least_squares", stopped_short)

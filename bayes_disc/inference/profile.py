@@ -34,10 +34,12 @@ lowest point (a local optimum, or a fit that stopped short of it); :func:`profil
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from ..physics.parallel import mp_context
+from .arrow import ArrowJacobian
 from .leastsq import MU_NEAR, LeastSquaresResult, jacobian_blocks, minimise, refit_from_lower, whitened_costs
 from .model import Problem
 
@@ -119,6 +121,8 @@ class ProfilePoint:
     cov: np.ndarray        # (dim, dim) local Gauss–Newton covariance at ``theta``
     t: float               # (value − θ̂_i) / sd_i, sd_i the Laplace sd at the optimum
     ok: bool = True
+    njev: int = 0          # Jacobians its fit computed (each one batched simulation per flight); 0 at the optimum
+    nfev: int = 0          # residual evaluations of its fit (each one simulation per flight), its starts' included
 
 
 @dataclass
@@ -285,10 +289,21 @@ def bent_start(x: np.ndarray, cov: np.ndarray, index: int, value: float, miss: n
     return out
 
 
+class FixedFit(NamedTuple):
+    """One profile point's fit (:func:`_fixed_fit`)."""
+
+    x: np.ndarray             # (dim,) θ*, the constrained optimum (θ_i = value)
+    cost: float               # ½ Σ whitened residual² there
+    ok: bool                  # converged
+    J: ArrowJacobian | None   # whitened Jacobian over every parameter at θ* or one small step before it
+    njev: int                 # Jacobians computed (one batched simulation per flight each)
+    nfev: int                 # residual evaluations, the starts' batched one included
+
+
 def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, cov0: np.ndarray, index: int, value: float,
                max_nfev: int, cost0: float, mu0: float = MU_NEAR, dtol: float = DECREMENT_TOL,
-               bent: np.ndarray | None = None, final: float = FINAL_DECREMENT):
-    """Optimum of every parameter but ``index`` (held at ``value``): (θ*, cost, converged, J), J the whitened
+               bent: np.ndarray | None = None, final: float = FINAL_DECREMENT) -> FixedFit:
+    """Optimum of every parameter but ``index`` (held at ``value``) (:class:`FixedFit`), with J the whitened
     Jacobian over every parameter (:class:`.arrow.ArrowJacobian`, for the point's covariance) at θ* or one
     small step before it.
 
@@ -317,7 +332,8 @@ def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, cov0: np.nda
                    keep_jacobian=dtol > 0, final_step=final)
     ok = res.status > 0
     J = None if not ok else res.jacobian if res.jacobian is not None else jacobian_blocks(res.x, problem, sigma)
-    return res.x, float(res.cost), ok, J
+    njev = res.njev + int(ok and res.jacobian is None)
+    return FixedFit(res.x, float(res.cost), ok, J, njev, res.nfev + 1)
 
 
 def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov_hat: np.ndarray, index: int,
@@ -353,16 +369,16 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
     for k in range(max(max_points, extended_points)):
         value = float(x[index] + side * step)
         bent = None if miss is None else bent_start(x, cov, index, value, miss, step / last_step)
-        x_new, cost, ok, J = _fixed_fit(problem, sigma, x, cov, index, value, max_nfev, cost0, mu0, dtol, bent,
-                                        final)
-        if not (ok and np.isfinite(cost)):
+        fit = _fixed_fit(problem, sigma, x, cov, index, value, max_nfev, cost0, mu0, dtol, bent, final)
+        if not (fit.ok and np.isfinite(fit.cost)):
             break
+        x_new = fit.x
         miss, last_step = x_new - conditional_start(x, cov, index, value), step
-        cov = J.information().inverse()
-        dev = 2.0 * (cost - cost0)
+        cov = fit.J.information().inverse()
+        dev = 2.0 * (fit.cost - cost0)
         points.append(ProfilePoint(value=value, theta=x_new, deviance=dev, cov=cov,
                                    t=(value - theta_hat[index]) / sd0,
-                                   ok=dev <= FAILED_DEVIANCE_FACTOR * max_deviance))
+                                   ok=dev <= FAILED_DEVIANCE_FACTOR * max_deviance, njev=fit.njev, nfev=fit.nfev))
         log_g = -0.5 * dev + conditional_log_volume(cov, index) - volume0
         best = max(best, log_g)
         if dev < -LOWER_OPTIMUM_DEVIANCE or side_done(k + 1, dev, log_g, best, max_deviance, max_points,
