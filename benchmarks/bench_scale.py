@@ -9,8 +9,9 @@ for is timed in this process:
   for comparison on the same data, one start of scipy's dense trust-region fit (the solver used before);
 * the profile likelihoods of the coefficients and the independence proposal built from them; also their
   work, which does not depend on the machine's speed: the Jacobians and residual evaluations of the final
-  paths' fits (``profiles.json``), each one batched simulation per flight, so the stage's simulation work is
-  linear in the flights where these counts stay level;
+  paths' fits (``profiles.json``; a pass that a lower point ended is not counted), each one batched
+  simulation per flight, so the stage's simulation work is linear in the flights where these counts stay
+  level;
 * sampling to the stopping rule (R-hat < 1.01, bulk ESS ≥ 400 for every coefficient, N/τ ≥ 10, at least
   ``min_steps``) or the cap; also reported, the time to the first convergence check that met R-hat < 1.01
   for every parameter and bulk ESS ≥ 400 for every coefficient (``rhat_ess_total_s``, from the check's
@@ -123,8 +124,8 @@ def one_case(n: int, seed: int, sampler: str, dense: bool, tmp: Path) -> dict:
     row["lower_optima"] = len(ls.lower_optima)
     paths = json.loads((out / "profiles.json").read_text())
     row["profile_points"] = sum(len(r["t"]) - 1 for r in paths.values())            # the optimum not counted
-    row["profile_jacobians"] = sum(sum(r["jacobians"]) for r in paths.values())
-    row["profile_evaluations"] = sum(sum(r["evaluations"]) for r in paths.values())
+    row["profile_jacobians"] = sum(r["jacobians"] for r in paths.values())
+    row["profile_evaluations"] = sum(r["evaluations"] for r in paths.values())
     t0 = time.perf_counter()
     chains = run_sampler(problem, proposal, cfg.sampler, out, progress=False)
     row["sampling_s"] = time.perf_counter() - t0

@@ -121,8 +121,16 @@ class ProfilePoint:
     cov: np.ndarray        # (dim, dim) local Gauss–Newton covariance at ``theta``
     t: float               # (value − θ̂_i) / sd_i, sd_i the Laplace sd at the optimum
     ok: bool = True
-    njev: int = 0          # Jacobians its fit computed (each one batched simulation per flight); 0 at the optimum
-    nfev: int = 0          # residual evaluations of its fit (each one simulation per flight), its starts' included
+
+
+@dataclass
+class ProfileSide:
+    """One side of a profile path (:func:`profile_side`): its points, moving away from θ̂, and the work of
+    every fit on it, a failed last fit included."""
+
+    points: list           # ProfilePoint, in the order they were fitted (the optimum not among them)
+    njev: int = 0          # Jacobians (each one batched simulation per flight)
+    nfev: int = 0          # residual evaluations (each one simulation per flight), the fits' batched starts included
 
 
 @dataclass
@@ -132,6 +140,8 @@ class ProfilePath:
     index: int
     name: str
     points: list
+    njev: int = 0          # Jacobians of its fits, both sides (:class:`ProfileSide`)
+    nfev: int = 0          # their residual evaluations
 
     @property
     def t(self) -> np.ndarray:
@@ -340,7 +350,7 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
                  side: float, max_deviance: float = MAX_DEVIANCE, max_points: int = MAX_POINTS,
                  max_nfev: int = 40, extended_points: int = EXTENDED_POINTS,
                  mu0: float = MU_NEAR, dtol: float = DECREMENT_TOL,
-                 final: float = FINAL_DECREMENT) -> list[ProfilePoint]:
+                 final: float = FINAL_DECREMENT) -> ProfileSide:
     """The points on one side (``side`` = +1: values above θ̂_i, −1: below) of parameter ``index``'s profile
     through the least-squares optimum ``theta_hat`` (noise ``sigma``, covariance ``cov_hat``).
 
@@ -357,19 +367,22 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
 
     Returns
     -------
-    list of ProfilePoint
-        In the order they were fitted (moving away from θ̂); the optimum itself is not among them.
+    ProfileSide
+        The points in the order they were fitted (moving away from θ̂; the optimum itself is not among them)
+        and the work of every fit.
     """
     cost0 = float(whitened_costs(theta_hat, problem, sigma)[0])
     sd0 = float(np.sqrt(cov_hat[index, index]))
     volume0 = conditional_log_volume(cov_hat, index)
-    points: list[ProfilePoint] = []
+    out = ProfileSide(points=[])
+    points = out.points
     x, cov, step, best = theta_hat.copy(), cov_hat, sd0, 0.0
     miss = last_step = None
     for k in range(max(max_points, extended_points)):
         value = float(x[index] + side * step)
         bent = None if miss is None else bent_start(x, cov, index, value, miss, step / last_step)
         fit = _fixed_fit(problem, sigma, x, cov, index, value, max_nfev, cost0, mu0, dtol, bent, final)
+        out.njev, out.nfev = out.njev + fit.njev, out.nfev + fit.nfev
         if not (fit.ok and np.isfinite(fit.cost)):
             break
         x_new = fit.x
@@ -378,23 +391,24 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
         dev = 2.0 * (fit.cost - cost0)
         points.append(ProfilePoint(value=value, theta=x_new, deviance=dev, cov=cov,
                                    t=(value - theta_hat[index]) / sd0,
-                                   ok=dev <= FAILED_DEVIANCE_FACTOR * max_deviance, njev=fit.njev, nfev=fit.nfev))
+                                   ok=dev <= FAILED_DEVIANCE_FACTOR * max_deviance))
         log_g = -0.5 * dev + conditional_log_volume(cov, index) - volume0
         best = max(best, log_g)
         if dev < -LOWER_OPTIMUM_DEVIANCE or side_done(k + 1, dev, log_g, best, max_deviance, max_points,
                                                        extended_points):
             break
         x, step = x_new, max(float(np.sqrt(cov[index, index])), 0.5 * sd0)
-    return points
+    return out
 
 
 def join_sides(problem: Problem, theta_hat: np.ndarray, cov_hat: np.ndarray, index: int,
-               sides: list[list[ProfilePoint]]) -> ProfilePath:
+               sides: list[ProfileSide]) -> ProfilePath:
     """The profile path of parameter ``index``: the optimum (t = 0) and the points of its sides
-    (:func:`profile_side`), sorted by value."""
+    (:func:`profile_side`), sorted by value, with the sides' work."""
     centre = ProfilePoint(value=float(theta_hat[index]), theta=theta_hat.copy(), deviance=0.0, cov=cov_hat, t=0.0)
-    points = sorted([centre, *(p for side in sides for p in side)], key=lambda p: p.value)
-    return ProfilePath(index=index, name=problem.names[index], points=points)
+    points = sorted([centre, *(p for side in sides for p in side.points)], key=lambda p: p.value)
+    return ProfilePath(index=index, name=problem.names[index], points=points, njev=sum(s.njev for s in sides),
+                       nfev=sum(s.nfev for s in sides))
 
 
 def profile_path(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov_hat: np.ndarray, index: int,
@@ -412,7 +426,7 @@ def _init_profile_worker(data: dict) -> None:
     _POOL.update(data)
 
 
-def _side_task(task: tuple[int, float]) -> list[ProfilePoint]:
+def _side_task(task: tuple[int, float]) -> ProfileSide:
     a = _POOL
     return profile_side(a["problem"], a["theta"], a["sigma"], a["cov"], task[0], task[1], **a["kwargs"])
 
@@ -497,9 +511,9 @@ def profile_paths(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, co
     out: dict[int, ProfilePath] = {}
 
     def collect(sides) -> list[ProfilePath]:
-        done: list[list[ProfilePoint]] = []
+        done: list[ProfileSide] = []
         for (i, _), side in zip(tasks, sides):
-            low = lowest_point(side) if stop_on_lower else None
+            low = lowest_point(side.points) if stop_on_lower else None
             if low is not None:
                 raise LowerOptimum(problem.names[i], low)
             done.append(side)

@@ -373,8 +373,7 @@ def posterior_approximation(problem, ls, processes: int, out: Path, progress: bo
             dep = path_departure(path, ls.theta, ls.cov)
             record[path.name] = {"value": [p.value for p in path.points], "t": path.t.tolist(),
                                  "deviance": path.deviance.tolist(), "departure_from_laplace": dep,
-                                 "shape": path.classify(), "jacobians": [p.njev for p in path.points],
-                                 "evaluations": [p.nfev for p in path.points]}
+                                 "shape": path.classify(), "jacobians": path.njev, "evaluations": path.nfev}
         (out / "profiles.json").write_text(json.dumps(record, indent=1))
         ridge = [n for n, r in record.items() if r["departure_from_laplace"] > PROFILE_DEPARTURE]
         refits = (f"least squares refitted {len(ls.lower_optima)} time(s) from a lower point on a profile; "
