@@ -6,7 +6,8 @@ import pytest
 from bayes_disc.physics import (Disc, Environment, SimulatorSettings, get_terms, literature_coefficients,
                                 simulate, simulate_reference)
 from bayes_disc.physics.equations import angular_momentum_world, kinetic_energy
-from bayes_disc.physics.frames import attitude_from_yaw_pitch_roll, omega_body_from_pqr, quat_to_matrix
+from bayes_disc.physics.frames import (attitude_from_yaw_pitch_roll, omega_body_from_pqr, quat_from_rotvec,
+                                      quat_multiply, quat_to_matrix)
 from bayes_disc.observation.synth import DEFAULT_MARKERS
 
 MARKERS = np.array(list(DEFAULT_MARKERS.values()))
@@ -24,6 +25,22 @@ def _conservation_errors(y0, t, disc, env, settings):
     energy = np.array([kinetic_energy(s, disc) + disc.mass * env.g * s[2] for s in states])
     H = np.array([angular_momentum_world(s, disc) for s in states])
     return np.abs(energy / energy[0] - 1).max(), np.abs(H - H[0]).max() / np.linalg.norm(H[0])
+
+
+def test_quaternion_product_composes_rotations_and_broadcasts():
+    """R(a ⊗ b) = R(a) R(b) (Hamilton convention, v_W = R v_B), for one quaternion against a batch, a batch
+    against one, and batches of matching shapes."""
+    rng = np.random.default_rng(3)
+    a = quat_from_rotvec(rng.normal(size=(5, 2, 3)))
+    b = quat_from_rotvec(rng.normal(size=(5, 2, 3)))
+    ab = quat_multiply(a, b)
+    assert ab.shape == (5, 2, 4)
+    np.testing.assert_allclose(quat_to_matrix(ab), quat_to_matrix(a) @ quat_to_matrix(b), atol=1e-14)
+    one = a[0, 0]
+    np.testing.assert_allclose(quat_multiply(one, b), np.stack([quat_multiply(one, q) for q in b.reshape(-1, 4)]
+                                                               ).reshape(b.shape), atol=0)
+    np.testing.assert_allclose(quat_multiply(b, one)[3, 1], quat_multiply(b[3, 1], one), atol=0)
+    np.testing.assert_allclose(quat_multiply([1.0, 0, 0, 0], b), b, atol=0)     # identity
 
 
 def test_torque_free_drag_free_conserves_energy_and_angular_momentum():

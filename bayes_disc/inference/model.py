@@ -396,7 +396,7 @@ class Problem:
         out = np.empty((theta.shape[0], self.flight_groups(k).size))
         preds, ok = self.channel_predictions(theta, k)
         for j, ((c, p), g) in enumerate(zip(preds, self._groups[k])):
-            ss = c.sum_squares(c.effective_residuals(c.residuals(p), self._extra(theta, k, j)))
+            ss = c.effective_sum_squares(p, self._extra(theta, k, j))
             out[:, g.start - base: g.stop - base] = np.where(ok[:, None] & np.isfinite(ss), ss, np.inf)
         return out
 

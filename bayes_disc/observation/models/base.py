@@ -232,6 +232,12 @@ class ObservationModel(ABC):
             out[:, g] = np.sum(r * r, axis=1)
         return out
 
+    def effective_sum_squares(self, prediction: np.ndarray, extra: np.ndarray | None) -> np.ndarray:
+        """S̃_g (B, n_groups) of a prediction: :meth:`sum_squares` of the :meth:`effective_residuals` of its
+        :meth:`residuals`. The likelihood needs only these sums; a model may compute them without the
+        residual arrays (:class:`.markers.MarkerPositions` for independent noise of one size)."""
+        return self.sum_squares(self.effective_residuals(self.residuals(prediction), extra))
+
     def log_likelihood(self, ss: np.ndarray) -> np.ndarray:
         """(B,) log p(y | θ) with every σ_g integrated out (Jeffreys prior), from ss (B, n_groups)."""
         return gaussian_marginal_loglik(ss, self.group_sizes)

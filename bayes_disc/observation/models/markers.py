@@ -33,6 +33,7 @@ import numpy as np
 
 from ..explanations import DataExplanation, predicted_markers
 from ..markers import FlightObservation
+from ._marker_kernels import seen_sum_squares
 from .base import ObservationModel, ResidualSeries
 from .noise import MarkerNoise, marker_noise
 
@@ -249,6 +250,16 @@ class MarkerPositions(ObservationModel):
         B, n, m, _ = prediction.shape      # np.take on a precomputed index: ~3x faster than the boolean mask
         r = np.take(prediction.reshape(B, n * m, 3), self._seen, axis=1) - self._obs[None]
         return r.reshape(B, -1)
+
+    def effective_sum_squares(self, prediction: np.ndarray, extra: np.ndarray | None) -> np.ndarray:
+        """S̃ (B, 1): with independent noise of one size (W = I) Σ (m − y)² over the observed coordinates in one
+        compiled pass (:func:`._marker_kernels.seen_sum_squares`); otherwise through the whitened residuals
+        (:meth:`.base.ObservationModel.effective_sum_squares`)."""
+        if not self.noise.white:
+            return super().effective_sum_squares(prediction, extra)
+        B, n, m, _ = prediction.shape
+        flat = np.ascontiguousarray(prediction).reshape(B, n * m, 3)
+        return seen_sum_squares(flat, self._seen, self._obs)[:, None]
 
     def residual_series(self, trajectories, extra, prediction, conditions, reference=None) -> ResidualSeries:
         """Marker mean projected on the flight-path and D frames [m] and the attitude residual [rad]
