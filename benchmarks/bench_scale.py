@@ -139,14 +139,13 @@ def one_case(n: int, seed: int, sampler: str, dense: bool, tmp: Path) -> dict:
     row.update(tau_max_coefficients=float(np.nanmax(tau[:problem.ic_start])),
                tau_max_initial_conditions=float(np.nanmax(tau[problem.ic_start:])))
     row["total_s"] = row["least_squares_s"] + row["profiles_s"] + row["sampling_s"]
-    # the criterion alone (R-hat < 1.01 and every coefficient's bulk ESS ≥ 400 at a check, without
-    # the sampler's further N/τ ≥ 10 and min_steps): the first check that met it
-    met = [h for h in last if h["rhat_max"] < cfg.sampler.rhat and h["ess_min_coef"] >= cfg.sampler.ess]
-    row["rhat_ess_steps"] = met[0]["steps"] if met else None
-    row["rhat_ess_total_s"] = (row["least_squares_s"] + row["profiles_s"] + met[0]["elapsed_s"]) if met else np.nan
-    coef = [h for h in last if h["rhat_max_coef"] < cfg.sampler.rhat and h["ess_min_coef"] >= cfg.sampler.ess]
-    row["coef_steps"] = coef[0]["steps"] if coef else None
-    row["coef_total_s"] = (row["least_squares_s"] + row["profiles_s"] + coef[0]["elapsed_s"]) if coef else np.nan
+    # the first check at which R-hat < 1.01 (of every parameter: rhat_ess; of the coefficients, the issue's
+    # criterion: coef) and every coefficient's bulk ESS ≥ 400, without the sampler's N/τ ≥ 10 and min_steps
+    for prefix, rhat_key in (("rhat_ess", "rhat_max"), ("coef", "rhat_max_coef")):
+        met = [h for h in last if h[rhat_key] < cfg.sampler.rhat and h["ess_min_coef"] >= cfg.sampler.ess]
+        row[f"{prefix}_steps"] = met[0]["steps"] if met else None
+        before = row["least_squares_s"] + row["profiles_s"]
+        row[f"{prefix}_total_s"] = before + met[0]["elapsed_s"] if met else np.nan
     row["peak_rss_mb"] = peak_mb()
     return row
 

@@ -375,7 +375,6 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
     sd0 = float(np.sqrt(cov_hat[index, index]))
     volume0 = conditional_log_volume(cov_hat, index)
     out = ProfileSide(points=[])
-    points = out.points
     x, cov, step, best = theta_hat.copy(), cov_hat, sd0, 0.0
     miss = last_step = None
     for k in range(max(max_points, extended_points)):
@@ -389,9 +388,9 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
         miss, last_step = x_new - conditional_start(x, cov, index, value), step
         cov = fit.J.information().inverse()
         dev = 2.0 * (fit.cost - cost0)
-        points.append(ProfilePoint(value=value, theta=x_new, deviance=dev, cov=cov,
-                                   t=(value - theta_hat[index]) / sd0,
-                                   ok=dev <= FAILED_DEVIANCE_FACTOR * max_deviance))
+        out.points.append(ProfilePoint(value=value, theta=x_new, deviance=dev, cov=cov,
+                                       t=(value - theta_hat[index]) / sd0,
+                                       ok=dev <= FAILED_DEVIANCE_FACTOR * max_deviance))
         log_g = -0.5 * dev + conditional_log_volume(cov, index) - volume0
         best = max(best, log_g)
         if dev < -LOWER_OPTIMUM_DEVIANCE or side_done(k + 1, dev, log_g, best, max_deviance, max_points,
