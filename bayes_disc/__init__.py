@@ -6,7 +6,8 @@ The Python API (:mod:`bayes_disc.api`)::
     run = bd.sample("config.yaml")          # or a RunConfig, or a dict with flights as DataFrames
     run.summary                             # pandas table: mean, sd, quantiles, R-hat, ESS per parameter
     run.idata                               # ArviZ InferenceData
-    run.report()                            # reports/<name>.html
+    run.report()                            # <output>/reports/<name>.html
+    run.ensembles                           # the posterior with the ensembles as chains (summary.json's R-hat)
     bd.load(run.output)                     # the same run, from disk
     bd.compare([run_a, run_b])              # PSIS-LOO comparison of runs of the same flights
 

@@ -3,12 +3,12 @@
 ``bd.sample(config)``, ``bd.identifiability(config)`` and ``bd.diagnose(config)`` run the same jobs as the
 command line and return result objects; ``bd.load(run_dir)`` reads a sampled run back from disk. A
 ``config`` is a CONFIG.yaml path, a :class:`~.inference.config.RunConfig`, or a dict with the keys of
-CONFIG.yaml (SPEC §5) whose flights may be given in memory::
+CONFIG.yaml (docs/configuration.md) whose flights may be given in memory::
 
     {"name": "demo", "markers": {...}, "flights": [{"data": dataframe}], ...}
 
 where ``dataframe`` is a pandas DataFrame (or a mapping of column name → 1-D array) with the columns of a
-marker file, ``flight, t, marker, x, y, z`` (SPEC §4; extra columns such as ``sigma_m`` allowed). In-memory
+marker file, ``flight, t, marker, x, y, z`` (docs/data-formats.md; extra columns such as ``sigma_m`` allowed). In-memory
 rows are validated exactly like a file's (:mod:`.observation.tables`); they are then written, with the
 configuration, to ``<output>/input/`` (``flights_<i>.csv``, ``config.yaml``) so that the run folder is
 self-contained: its report, ``bd.load`` and the command line work on it later. Progress is logged (module
@@ -16,351 +16,24 @@ loggers under ``bayes_disc``; ``logging.basicConfig(level=logging.INFO)`` shows 
 """
 from __future__ import annotations
 
-import json
 import logging
 import os
 import shutil
 import tempfile
-import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
-from functools import cached_property
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+from .jobs.results import DiagnosisResult, IdentifiabilityResult, RunResult, SampleResult
 
 if TYPE_CHECKING:                                  # imported lazily at run time: `import bayes_disc` stays light
     from .inference.config import RunConfig
 
 logger = logging.getLogger(__name__)
 
-#: columns of :attr:`SampleResult.summary` (the SPEC §6 record of every parameter), in order
-SUMMARY_COLUMNS = ("mean", "sd", "q05", "q50", "q95", "r_hat", "ess_bulk")
-#: folder of ``<name>.html`` when :meth:`SampleResult.report` is given no path (as the command line)
-DEFAULT_REPORTS_DIR = Path("reports")
 #: sub-folder of a run's output that holds the configuration and data given as a dict / in memory
 INPUT_DIR = "input"
-
-
-# ------------------------------------------------------------------------------------------- results
-def _read_json(path: Path, what: str) -> dict:
-    if not path.is_file():
-        raise FileNotFoundError(f"{path.parent}: no {path.name} (not the output folder of {what})")
-    return json.loads(path.read_text())
-
-
-def _build_report(run_dir: Path, path, seed: int, processes: int) -> Path:
-    """The HTML report of ``run_dir`` at ``path`` (a ``.html`` file or a folder for ``<name>.html``), drawn in
-    ``processes`` worker processes."""
-    from .report import build_report
-    if path is None:
-        return build_report(run_dir, reports_dir=DEFAULT_REPORTS_DIR, seed=seed, processes=processes)
-    target = Path(path)
-    if target.suffix.lower() != ".html":
-        return build_report(run_dir, reports_dir=target, seed=seed, processes=processes)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=target.parent) as tmp:
-        built = build_report(run_dir, reports_dir=Path(tmp), seed=seed, processes=processes)
-        built.replace(target)
-    return target
-
-
-@dataclass
-class SampleResult:
-    """A sampled run: the posterior of the coefficients, noise scales and initial conditions.
-
-    Attributes
-    ----------
-    output : Path
-        The run folder (summary.json, posterior.nc, run_info.json, least-squares files, chains).
-    raw : dict
-        The content of ``summary.json`` (SPEC §6).
-    """
-
-    output: Path
-    raw: dict = field(repr=False)
-
-    @classmethod
-    def from_dir(cls, run_dir) -> "SampleResult":
-        """Read a sampled run folder.
-
-        Parameters
-        ----------
-        run_dir : str or Path
-            Output folder of ``sample`` (holds summary.json and posterior.nc).
-
-        Returns
-        -------
-        SampleResult
-
-        Raises
-        ------
-        FileNotFoundError
-            If the folder holds no summary.json or no posterior.nc.
-        """
-        run_dir = Path(run_dir)
-        raw = _read_json(run_dir / "summary.json", "`bayes-disc sample`")
-        if not (run_dir / "posterior.nc").is_file():
-            raise FileNotFoundError(f"{run_dir}: no posterior.nc (not the output folder of `bayes-disc sample`)")
-        return cls(output=run_dir, raw=raw)
-
-    @property
-    def name(self) -> str:
-        """The run name."""
-        return self.raw["name"]
-
-    @property
-    def coefficients(self) -> list[str]:
-        """Names of the estimated coefficients: the ten of SPEC §2, then extra terms' parameters."""
-        return list(self.raw["coefficients"])
-
-    @property
-    def convergence(self) -> dict:
-        """Sampler convergence: ``converged``, ``reason``, steps, burn-in, τ [steps], R-hat max, ESS min."""
-        return self.raw["convergence"]
-
-    @property
-    def converged(self) -> bool:
-        """Whether every convergence criterion was met before the step cap."""
-        return bool(self.raw["convergence"]["converged"])
-
-    @property
-    def summary(self):
-        """Posterior summary table.
-
-        Returns
-        -------
-        pandas.DataFrame
-            One row per parameter (index ``parameter``: coefficients, ``sigma_<flight>`` [m], initial
-            conditions [SI]), columns :data:`SUMMARY_COLUMNS`: mean, sd, 5/50/95 % quantiles, R-hat, bulk ESS.
-        """
-        import pandas as pd
-        params = self.raw["parameters"]
-        frame = pd.DataFrame([[params[n][c] for c in SUMMARY_COLUMNS] for n in params], index=list(params),
-                             columns=list(SUMMARY_COLUMNS), dtype=float)
-        frame.index.name = "parameter"
-        return frame
-
-    @cached_property
-    def idata(self):
-        """The posterior as ArviZ InferenceData (``posterior.nc``; groups posterior, sample_stats, prior,
-        observed_data), read once and fully into memory."""
-        import arviz as az
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            with az.rc_context({"data.load": "eager"}):
-                return az.from_netcdf(str(self.output / "posterior.nc"))
-
-    def report(self, path=None, *, seed: int | None = None) -> Path:
-        """Build the self-contained HTML report of this run (figures also in ``<output>/figures``).
-
-        Parameters
-        ----------
-        path : str or Path, optional
-            A ``.html`` file, or a folder for ``<name>.html``; default ``reports/<name>.html`` in the
-            working directory (as the command line).
-        seed : int, optional
-            Seed of the report's random draws; default the run's sampler seed (as the command line).
-            The figures are drawn in the run's ``processes`` worker processes.
-
-        Returns
-        -------
-        Path
-            The HTML file written.
-        """
-        seed = self.raw["sampler_settings"]["seed"] if seed is None else seed
-        return _build_report(self.output, path, int(seed), int(self.raw["sampler_settings"]["processes"]))
-
-
-@dataclass
-class IdentifiabilityResult:
-    """Which coefficients the flights determine, and the throw that would help most.
-
-    Attributes
-    ----------
-    output : Path
-        The run folder holding ``identifiability.json``.
-    raw : dict
-        The content of ``identifiability.json``.
-    """
-
-    output: Path
-    raw: dict = field(repr=False)
-
-    @classmethod
-    def from_dir(cls, run_dir) -> "IdentifiabilityResult":
-        """Read ``<run_dir>/identifiability.json``.
-
-        Parameters
-        ----------
-        run_dir : str or Path
-            Output folder of ``identifiability``.
-
-        Returns
-        -------
-        IdentifiabilityResult
-        """
-        run_dir = Path(run_dir)
-        return cls(output=run_dir, raw=_read_json(run_dir / "identifiability.json", "`bayes-disc identifiability`"))
-
-    @property
-    def verdicts(self) -> dict[str, str]:
-        """``{coefficient: "identified" | "weak" | "unidentified"}``."""
-        return {n: v["verdict"] for n, v in self.raw["coefficients"].items()}
-
-    @property
-    def recommendation(self) -> str | None:
-        """The next throw in words (None when the design step was skipped)."""
-        design = self.raw.get("design")
-        return None if design is None else design["recommendation"]
-
-    @property
-    def summary(self):
-        """Verdict table.
-
-        Returns
-        -------
-        pandas.DataFrame
-            One row per coefficient (index ``coefficient``) with ``verdict``, ``reason`` and the numbers
-            behind them (least-squares ``sd``, ``prior_sd``, ``contraction`` …, as in the file).
-        """
-        import pandas as pd
-        coefs = self.raw["coefficients"]
-        frame = pd.DataFrame.from_dict({n: {k: v for k, v in rec.items() if not isinstance(v, (dict, list))}
-                                        for n, rec in coefs.items()}, orient="index")
-        frame.index.name = "coefficient"
-        return frame
-
-    def report(self, path=None, *, seed: int | None = None) -> Path:
-        """The HTML report of the sampled run in the same folder (it includes the identifiability section).
-
-        Parameters
-        ----------
-        path : str or Path, optional
-            As for :meth:`SampleResult.report`.
-        seed : int, optional
-            As for :meth:`SampleResult.report`.
-
-        Returns
-        -------
-        Path
-            The HTML file written.
-
-        Raises
-        ------
-        FileNotFoundError
-            If the folder holds no sampled run (run :func:`sample` first).
-        """
-        return SampleResult.from_dir(self.output).report(path, seed=seed)
-
-
-@dataclass
-class DiagnosisResult:
-    """The missing-physics diagnosis: accepted effects, RMS before/after, the refit.
-
-    Attributes
-    ----------
-    output : Path
-        The run folder holding ``diagnosis.json``.
-    raw : dict
-        The content of ``diagnosis.json`` (SPEC §6 keys and the details of
-        :mod:`.diagnostics.diagnosis`).
-    """
-
-    output: Path
-    raw: dict = field(repr=False)
-
-    @classmethod
-    def from_dir(cls, run_dir) -> "DiagnosisResult":
-        """Read ``<run_dir>/diagnosis.json``.
-
-        Parameters
-        ----------
-        run_dir : str or Path
-            Output folder of ``diagnose``.
-
-        Returns
-        -------
-        DiagnosisResult
-        """
-        run_dir = Path(run_dir)
-        return cls(output=run_dir, raw=_read_json(run_dir / "diagnosis.json", "`bayes-disc diagnose`"))
-
-    @property
-    def verdict(self) -> str:
-        """``"adequate"`` or ``"missing_physics"``."""
-        return self.raw["verdict"]
-
-    @property
-    def effects(self) -> list[dict]:
-        """Accepted effects ranked best first: ``{id, evidence (ΔBIC), estimate, where, ...}``."""
-        return self.raw["effects"]
-
-    @property
-    def words(self) -> str:
-        """The diagnosis in words."""
-        return self.raw["words"]
-
-    @property
-    def learned(self) -> dict | None:
-        """The learned correction (``learned_discrepancy`` of ``diagnosis.json``: selected columns, ΔBIC,
-        whiteness, the flight variable and family it names, its curve), or None when the base model left
-        white residuals."""
-        return self.raw.get("learned_discrepancy")
-
-    @property
-    def summary(self):
-        """Every candidate term tried.
-
-        Returns
-        -------
-        pandas.DataFrame
-            One row per candidate and round: ``round``, ``id``, ``evidence`` (ΔBIC), ``status``.
-        """
-        import pandas as pd
-        rows = [{k: c[k] for k in ("round", "id", "evidence", "status")} for c in self.raw["candidates"]]
-        return pd.DataFrame(rows, columns=["round", "id", "evidence", "status"])
-
-    @property
-    def rms_mm(self):
-        """RMS residual per flight before and after the accepted terms.
-
-        Returns
-        -------
-        pandas.DataFrame
-            Index ``flight``, columns ``before`` and ``after`` [mm].
-        """
-        import pandas as pd
-        frame = pd.DataFrame({"before": self.raw["rms_before_mm"], "after": self.raw["rms_after_mm"]})
-        frame.index.name = "flight"
-        return frame
-
-    @property
-    def refit(self) -> SampleResult | None:
-        """The resampled run with the accepted terms (None when nothing was resampled)."""
-        run = self.raw["settings"]["refit_run"]
-        return None if run is None else SampleResult.from_dir(run)
-
-    def report(self, path=None, *, seed: int | None = None) -> Path:
-        """The HTML report of the sampled run in the same folder (it includes the diagnosis).
-
-        Parameters
-        ----------
-        path : str or Path, optional
-            As for :meth:`SampleResult.report`.
-        seed : int, optional
-            As for :meth:`SampleResult.report`.
-
-        Returns
-        -------
-        Path
-            The HTML file written.
-
-        Raises
-        ------
-        FileNotFoundError
-            If the folder holds no sampled run (run :func:`sample` first).
-        """
-        return SampleResult.from_dir(self.output).report(path, seed=seed)
 
 
 # ----------------------------------------------------------------------------------- configurations
@@ -480,7 +153,7 @@ def run_config(config, *, output=None, base_dir=None) -> RunConfig:
 
 # ------------------------------------------------------------------------------------------ the jobs
 def sample(config, *, output=None, progress: bool = True, resume: bool = False, report: bool = False,
-           base_dir=None) -> SampleResult:
+           overwrite: bool = False, base_dir=None) -> SampleResult:
     """Sample the posterior of a run (least squares, then emcee), as ``bayes-disc sample``.
 
     Parameters
@@ -494,23 +167,32 @@ def sample(config, *, output=None, progress: bool = True, resume: bool = False, 
     resume : bool
         Continue an interrupted run from its chain files.
     report : bool
-        Also build ``reports/<name>.html`` (otherwise call :meth:`SampleResult.report`).
+        Also build ``<output>/reports/<name>.html`` (otherwise call :meth:`SampleResult.report`).
+    overwrite : bool
+        Replace an earlier run in the output folder (without it, or ``resume``, such a folder is refused).
     base_dir : str or Path, optional
         For a dict config: folder of its relative paths (default: the working directory).
 
     Returns
     -------
     SampleResult
-        ``.summary`` (table of every parameter), ``.idata`` (ArviZ), ``.report(path)``, ``.output``.
+        ``.summary`` (table of every parameter), ``.idata`` and ``.ensembles`` (ArviZ), ``.report(path)``,
+        ``.output``.
+
+    Raises
+    ------
+    ConfigError
+        For a bad configuration, or an output folder that holds an earlier run.
     """
-    from . import pipeline
+    from .jobs.outputs import check_fresh_output
+    from .jobs.sample import sample as sample_job
     cfg = run_config(config, output=output, base_dir=base_dir)
-    outcome = pipeline.sample(cfg, resume=resume, progress=progress, report=report,
-                              reports_dir=pipeline.reports_dir(output))
+    check_fresh_output(cfg, "sample", overwrite=overwrite, resume=resume)
+    outcome = sample_job(cfg, resume=resume, progress=progress, report=report)
     return SampleResult(output=Path(cfg.output), raw=outcome.result)
 
 
-def identifiability(config, *, output=None, profiles: bool = False, design: bool = True,
+def identifiability(config, *, output=None, profiles: bool = False, design: bool = True, overwrite: bool = False,
                     base_dir=None) -> IdentifiabilityResult:
     """Which coefficients the flights determine, and the next throw, as ``bayes-disc identifiability``.
 
@@ -524,6 +206,8 @@ def identifiability(config, *, output=None, profiles: bool = False, design: bool
         Also profile the likelihood of every coefficient.
     design : bool
         Rank candidate throws.
+    overwrite : bool
+        Replace an earlier ``identifiability.json`` in the output folder (refused otherwise).
     base_dir : str or Path, optional
         For a dict config: folder of its relative paths.
 
@@ -532,14 +216,16 @@ def identifiability(config, *, output=None, profiles: bool = False, design: bool
     IdentifiabilityResult
         ``.verdicts``, ``.summary`` (table per coefficient), ``.recommendation``, ``.raw``.
     """
-    from . import pipeline
+    from .jobs.identifiability import identifiability as identifiability_job
+    from .jobs.outputs import check_fresh_output
     cfg = run_config(config, output=output, base_dir=base_dir)
-    outcome = pipeline.identifiability(cfg, profiles=profiles, design=design)
+    check_fresh_output(cfg, "identifiability", overwrite=overwrite)
+    outcome = identifiability_job(cfg, profiles=profiles, design=design)
     return IdentifiabilityResult(output=Path(cfg.output), raw=outcome.result)
 
 
 def diagnose(config, *, output=None, sample: bool = True, processes: int = 2, progress: bool = True,
-             report: bool = False, base_dir=None, learn: bool = True) -> DiagnosisResult:
+             report: bool = False, overwrite: bool = False, base_dir=None, learn: bool = True) -> DiagnosisResult:
     """Name the physics the model misses (and resample with it), as ``bayes-disc diagnose``.
 
     Parameters
@@ -555,7 +241,9 @@ def diagnose(config, *, output=None, sample: bool = True, processes: int = 2, pr
     progress : bool
         Show a progress bar while resampling.
     report : bool
-        Also rebuild ``reports/<name>.html`` when the folder holds a sampled run.
+        Also rebuild ``<output>/reports/<name>.html`` when the folder holds a sampled run.
+    overwrite : bool
+        Replace an earlier ``diagnosis.json`` in the output folder (refused otherwise).
     base_dir : str or Path, optional
         For a dict config: folder of its relative paths.
     learn : bool
@@ -566,10 +254,11 @@ def diagnose(config, *, output=None, sample: bool = True, processes: int = 2, pr
     DiagnosisResult
         ``.verdict``, ``.effects``, ``.words``, ``.summary`` (candidates), ``.rms_mm``, ``.refit``.
     """
-    from . import pipeline
+    from .jobs.diagnose import diagnose as diagnose_job
+    from .jobs.outputs import check_fresh_output
     cfg = run_config(config, output=output, base_dir=base_dir)
-    outcome = pipeline.diagnose(cfg, sample=sample, processes=processes, progress=progress, report=report,
-                                reports_dir=pipeline.reports_dir(output), learn=learn)
+    check_fresh_output(cfg, "diagnose", overwrite=overwrite)
+    outcome = diagnose_job(cfg, sample=sample, processes=processes, progress=progress, report=report, learn=learn)
     return DiagnosisResult(output=Path(cfg.output), raw=outcome.result)
 
 
@@ -600,7 +289,7 @@ def compare(run_dirs):
 
     Parameters
     ----------
-    run_dirs : sequence of str, Path or SampleResult, or dict {label: any of these}
+    run_dirs : sequence of str, Path or RunResult, or dict {label: any of these}
         Two or more sampled runs (output folders of :func:`sample`, or its results); labels default to the
         folder's name (its parent's name for a folder called ``out``).
 
@@ -621,8 +310,7 @@ def compare(run_dirs):
     from .inference.results import compare_runs
 
     def folder(run):
-        return run.output if isinstance(run, SampleResult) else run
+        return run.output if isinstance(run, RunResult) else run
     if isinstance(run_dirs, Mapping):
         return compare_runs({label: folder(r) for label, r in run_dirs.items()})
     return compare_runs([folder(r) for r in run_dirs])
-

@@ -1,7 +1,9 @@
-"""Command line: ``bayes-disc COMMAND ...`` (SPEC §6). Bad input: one-line reason on stderr, exit 2.
+"""Command line: ``bayes-disc COMMAND ...`` (docs/outputs.md). Bad input: one-line reason on stderr, exit 2.
 
 Progress messages go to stderr, results (tables, the diagnosis in words) to stdout; ``-v`` shows more,
-``-q`` less (:mod:`._logging`). The jobs run through :mod:`.pipeline` (job, then report), as in the API.
+``-q`` less (:mod:`._logging`). The commands run the jobs of :mod:`.jobs` (job, then report), as the API
+does. Every job writes into its run folder; a folder that already holds that job's results is refused
+unless ``--overwrite`` (or, for ``sample``, ``--resume``) is given.
 """
 from __future__ import annotations
 
@@ -9,18 +11,16 @@ import argparse
 import logging
 import sys
 from pathlib import Path
-from types import MappingProxyType
 
 from ._logging import cli_logging
-from ._version import __version__
+from ._version import DOCUMENTATION_URL, __version__
+from .jobs.progress import RESULT
 from .observation.cases import CaseFileError, load_case, simulate_case
 from .observation.config_io import ConfigError
 from .observation.imu.formats import ImuFileError
 from .observation.markers import MarkerFileError, write_marker_csv
 
 logger = logging.getLogger(__name__)
-#: ``extra`` of log records that are results (printed on stdout)
-RESULT = MappingProxyType({"result": True})
 
 #: exceptions that mean "bad input" rather than a bug: reported in one line, exit status 2
 INPUT_ERRORS: tuple[type[Exception], ...] = (ConfigError, MarkerFileError, CaseFileError, ImuFileError,
@@ -49,36 +49,48 @@ def _cmd_synth(args) -> int:
     return 0
 
 
-def _cmd_sample(args) -> int:
-    from . import pipeline
+def _cmd_demo(args) -> int:
+    from .observation.demo import write_demo
+    folder = Path(args.folder)
+    written = write_demo(folder, overwrite=args.overwrite)
+    logger.info(f"wrote {', '.join(p.name for p in written)} into {folder}: four synthetic flights "
+                f"(`bayes-disc sample {folder / 'config.yaml'}` samples their posterior)")
+    return 0
+
+
+def _run_config(args, job: str):
+    """The run configuration of ``args.config`` with ``--output``, refused when its folder already holds
+    ``job``'s results and neither ``--overwrite`` nor ``--resume`` was given."""
     from .inference.config import load_config
+    from .jobs.outputs import check_fresh_output
     cfg = load_config(args.config, output_override=args.output)
-    summary = pipeline.sample(cfg, resume=args.resume, progress=not args.no_progress,
-                              reports_dir=pipeline.reports_dir(args.output)).result
+    check_fresh_output(cfg, job, overwrite=args.overwrite, resume=getattr(args, "resume", False))
+    return cfg
+
+
+def _cmd_sample(args) -> int:
+    from .jobs.sample import sample
+    cfg = _run_config(args, "sample")
+    summary = sample(cfg, resume=args.resume, progress=not args.no_progress).result
     return 0 if summary["convergence"]["converged"] or not args.strict else 3
 
 
 def _cmd_identifiability(args) -> int:
-    from . import pipeline
-    from .inference.config import load_config
-    cfg = load_config(args.config, output_override=args.output)
-    pipeline.identifiability(cfg, profiles=args.profiles, design=not args.no_design)
+    from .jobs.identifiability import identifiability
+    identifiability(_run_config(args, "identifiability"), profiles=args.profiles, design=not args.no_design)
     return 0
 
 
 def _cmd_diagnose(args) -> int:
-    from . import pipeline
-    from .inference.config import load_config
-    cfg = load_config(args.config, output_override=args.output)
-    pipeline.diagnose(cfg, sample=not args.no_sample, processes=args.processes, progress=not args.no_progress,
-                      reports_dir=pipeline.reports_dir(args.output), learn=not args.no_learn)
+    from .jobs.diagnose import diagnose
+    diagnose(_run_config(args, "diagnose"), sample=not args.no_sample, processes=args.processes,
+             progress=not args.no_progress, learn=not args.no_learn)
     return 0
 
 
 def _cmd_predict(args) -> int:
-    from .inference.config import load_config
-    from .inference.predict import run_predict
-    cfg = load_config(args.config, output_override=args.output)
+    from .jobs.predict import run_predict
+    cfg = _run_config(args, "predict")
     result = run_predict(cfg, args.run_dir, output=args.output)
     for name, f in result["flights"].items():
         words = f["reason"] if f["status"] != "ok" else ", ".join(
@@ -155,7 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
     """
     parser = argparse.ArgumentParser(prog="bayes-disc",
                                      description="Estimate flying-disc aerodynamic coefficients from tracked "
-                                                 "flights. Documentation: docs/index.md in the repository.")
+                                                 f"flights. Documentation: {DOCUMENTATION_URL}")
     parser.add_argument("--version", action="version", version=f"bayes-disc {__version__}")
     _verbosity_options(parser, 0)
     common = argparse.ArgumentParser(add_help=False)
@@ -167,6 +179,15 @@ def build_parser() -> argparse.ArgumentParser:
                                 "sample rate, duration (format: docs/data-formats.md)")
     p.add_argument("-o", "--output", required=True, help="marker CSV to write (format: docs/data-formats.md)")
     p.set_defaults(func=_cmd_simulate)
+    p = sub.add_parser("demo", parents=[common],
+                       help="write the demo flights and their run configuration into a folder",
+                       description="Writes four synthetic flights (flights.csv, made by synth.yaml with the "
+                                   "Hummel & Hubbard 2002 coefficients; truth.json holds the truth) and their run "
+                                   "configuration config.yaml into FOLDER, so that `bayes-disc sample "
+                                   "FOLDER/config.yaml` runs anywhere, from an installed package.")
+    p.add_argument("folder", metavar="FOLDER", help="folder to write into (created if missing)")
+    p.add_argument("--overwrite", action="store_true", help="replace demo files already in FOLDER")
+    p.set_defaults(func=_cmd_demo)
     p = sub.add_parser("synth", parents=[common],
                        help="make synthetic flights from a SYNTH.yaml description")
     p.add_argument("config", help="SYNTH.yaml")
@@ -176,14 +197,14 @@ def build_parser() -> argparse.ArgumentParser:
                        description="The main job: joint least squares, then emcee ensembles, over the ten "
                                    "coefficients and every flight's initial conditions. Writes summary.json, "
                                    "posterior.nc, least_squares.json, profiles.json, run_info.json and chains/ in the "
-                                   "output folder, and the report reports/<name>.html: in the working directory, "
-                                   "or with --output DIR in DIR/reports/ (docs/outputs.md).")
+                                   "output folder, and the HTML report reports/<name>.html inside it "
+                                   "(docs/outputs.md).")
     p.add_argument("config", help="run configuration YAML (keys: docs/configuration.md)")
     p.add_argument("--resume", action="store_true",
                    help="continue an interrupted run from its chain files (same configuration; the saved least "
                         "squares and proposals are reused)")
-    p.add_argument("--output", metavar="DIR",
-                   help="override the config's output folder; the report then goes to DIR/reports/<name>.html")
+    p.add_argument("--output", metavar="DIR", help="override the config's output folder")
+    _overwrite_option(p, "sample")
     p.add_argument("--no-progress", action="store_true",
                    help="no progress bars (stages and convergence checks are logged instead; bars are shown "
                         "only on a terminal)")
@@ -198,7 +219,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("config", help="run configuration YAML (keys: docs/configuration.md)")
     p.add_argument("--profiles", action="store_true", help="also profile the likelihood of every coefficient")
     p.add_argument("--no-design", action="store_true", help="skip the ranking of candidate throws")
-    p.add_argument("--output", help="override the config's output folder")
+    p.add_argument("--output", metavar="DIR", help="override the config's output folder")
+    _overwrite_option(p, "identifiability")
     p.set_defaults(func=_cmd_identifiability)
     p = sub.add_parser("diagnose", parents=[common],
                        help="locate a model–data mismatch, name the missing physics, refit",
@@ -213,8 +235,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="skip the learned correction in height, α and spin when no term explains the data "
                    "(it costs several refits with up to 46 extra parameters)")
     p.add_argument("--processes", type=_positive_int, default=2, help="parallel candidate fits (default 2)")
-    p.add_argument("--output", metavar="DIR",
-                   help="override the config's output folder; the rebuilt report then goes to DIR/reports/<name>.html")
+    p.add_argument("--output", metavar="DIR", help="override the config's output folder (the rebuilt report goes "
+                                                   "to DIR/reports/<name>.html when DIR holds a sampled run)")
+    _overwrite_option(p, "diagnose")
     p.add_argument("--no-progress", action="store_true", help="no progress bar while resampling")
     p.set_defaults(func=_cmd_diagnose)
     p = sub.add_parser("predict", parents=[common],
@@ -225,7 +248,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "prediction.json: RMS per channel, fixed and free (docs/outputs.md).")
     p.add_argument("config", help="run configuration YAML of the held-out flights (keys: docs/configuration.md)")
     p.add_argument("--from", dest="run_dir", required=True, help="output folder of a `bayes-disc sample` run")
-    p.add_argument("--output", help="override the config's output folder")
+    p.add_argument("--output", metavar="DIR", help="override the config's output folder")
+    _overwrite_option(p, "predict")
     p.set_defaults(func=_cmd_predict)
     p = sub.add_parser("calibrate", parents=[common],
                        help="simulation-based calibration over many synthetic data sets, on Dask",
@@ -255,6 +279,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=_cmd_compare)
     _register_optional(sub, common)
     return parser
+
+
+def _overwrite_option(parser, job: str) -> None:
+    """``--overwrite``: replace the results of an earlier ``job`` in the output folder (refused otherwise)."""
+    parser.add_argument("--overwrite", action="store_true",
+                        help=f"replace the results of an earlier `{job}` in the output folder (without it, such a "
+                             "folder is refused" + (", and --resume continues the run there)" if job == "sample"
+                                                    else ")"))
 
 
 def _positive_int(text: str) -> int:

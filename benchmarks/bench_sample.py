@@ -23,7 +23,7 @@ sys.path.insert(0, str(ROOT))
 
 from bayes_disc.inference.config import load_config  # noqa: E402
 from bayes_disc.inference.data import build_problem  # noqa: E402
-from bayes_disc.inference.run import run_sample  # noqa: E402
+from bayes_disc.jobs.sample import run_sample  # noqa: E402
 from bayes_disc.inference.sampler import n_walkers  # noqa: E402
 
 

@@ -44,7 +44,7 @@ sys.path.insert(0, str(ROOT))
 from bayes_disc.inference.config import load_config  # noqa: E402
 from bayes_disc.inference.data import build_problem  # noqa: E402
 from bayes_disc.inference.leastsq import fit_least_squares, whitened_jacobian, whitened_residuals  # noqa: E402
-from bayes_disc.inference.run import posterior_approximation  # noqa: E402
+from bayes_disc.jobs.sample import posterior_approximation  # noqa: E402
 from bayes_disc.inference.sampler import n_walkers, run_sampler  # noqa: E402
 from bayes_disc.observation.synth import load_synth_spec, synthesize, write_synth  # noqa: E402
 

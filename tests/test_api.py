@@ -3,6 +3,7 @@ import json
 import logging
 import re
 
+import arviz as az
 import numpy as np
 import pandas as pd
 import pytest
@@ -60,6 +61,11 @@ def test_sample_from_dataframe_then_load_gives_the_same_summary(tmp_path, monkey
     assert post["CLa"].shape[0] * post["CLa"].shape[1] > 100
     assert float(post["CLa"].mean()) == pytest.approx(run.summary.loc["CLa", "mean"],
                                                       abs=0.2 * run.summary.loc["CLa", "sd"])
+    # the documented ArviZ view: ensembles as chains, so ArviZ's R-hat is summary.json's
+    coefs = names[:10]
+    view = az.summary(loaded.ensembles, var_names=coefs, kind="diagnostics", round_to="none")
+    np.testing.assert_allclose(view.loc[coefs, "r_hat"], loaded.summary.loc[coefs, "r_hat"], rtol=1e-12)
+    assert loaded.ensembles.posterior.sizes["chain"] == run.convergence["ensembles"]
     # the report was built once, and said so once
     html_lines = [r.getMessage() for r in caplog.records if ".html" in r.getMessage()]
     assert len(html_lines) == 1 and "rt.html" in html_lines[0], html_lines

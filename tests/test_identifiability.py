@@ -116,7 +116,7 @@ def test_profiles_of_the_demo_are_bounded_and_gaussian_near_the_optimum(tmp_path
     from bayes_disc.inference.config import load_config
     from bayes_disc.inference.leastsq import fit_least_squares
     from bayes_disc.inference.profile import profile_path, profile_paths
-    from bayes_disc.inference.run import build_problem
+    from bayes_disc.inference.data import build_problem
     cfg = load_config(_demo_data(tmp_path))
     problem = build_problem(cfg)
     ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,

@@ -9,7 +9,9 @@ from bayes_disc.observation.imu import (G_STANDARD, ImuFileError, InertialLog, r
                                         read_imu_csv, write_imu_csv)
 from bayes_disc.observation.imu.formats import FLATBALL_COLUMNS
 
-DATA = Path("/work/shared/data/flatball")
+from conftest import SHARED
+
+DATA = SHARED / "data" / "flatball"
 FILES = sorted(DATA.glob("*.csv")) if DATA.is_dir() else []
 needs_data = pytest.mark.skipif(not FILES, reason="flatball data folder not available")
 

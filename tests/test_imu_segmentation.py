@@ -1,6 +1,5 @@
 """Throw segmentation: release, first impact, orientation (real flatball logs and a synthetic log)."""
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -8,7 +7,9 @@ import pytest
 from bayes_disc.observation.imu import (G_STANDARD, InertialLog, SegmentationSettings, find_throws, flight_names,
                                         read_flatball_ins, throw_logs)
 
-DATA = Path("/work/shared/data/flatball")
+from conftest import SHARED
+
+DATA = SHARED / "data" / "flatball"
 FILES = sorted(DATA.glob("*.csv")) if DATA.is_dir() else []
 needs_data = pytest.mark.skipif(not FILES, reason="flatball data folder not available")
 

@@ -1,5 +1,4 @@
 """Row period from magnetometer vs gyro, and the barometer cadence: synthetic and real logs."""
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -8,7 +7,9 @@ from bayes_disc.observation.imu import (InertialLog, baro_cadence, estimate_time
                                         period_from_mag_gyro, read_flatball_ins)
 from bayes_disc.observation.imu.timebase import FLATBALL_BARO_SLEEP
 
-DATA = Path("/work/shared/data/flatball")
+from conftest import SHARED
+
+DATA = SHARED / "data" / "flatball"
 FILES = sorted(DATA.glob("*.csv")) if DATA.is_dir() else []
 needs_data = pytest.mark.skipif(not FILES, reason="flatball data folder not available")
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from bayes_disc.cli import main
-from bayes_disc.diagnostics import run as diag_run
+from bayes_disc.jobs import identifiability as diag_run
 from bayes_disc.inference import profile
 from bayes_disc.inference.config import load_config
 from bayes_disc.inference.initial import initial_state_from_data
@@ -16,7 +16,7 @@ from bayes_disc.inference.leastsq import minimise, refine_least_squares, whitene
 from bayes_disc.inference.model import Problem
 from bayes_disc.inference.profile import (LOWER_OPTIMUM_DEVIANCE, LowerOptimum, lowest_point, profile_paths,
                                           profile_side, ridge_first)
-from bayes_disc.inference.run import posterior_approximation
+from bayes_disc.jobs.sample import posterior_approximation
 from bayes_disc.observation.synth import DEFAULT_MARKERS, LaunchSpec, SynthSpec, synthesize
 
 from conftest import REPO, keep_flights

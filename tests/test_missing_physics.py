@@ -13,7 +13,7 @@ import pytest
 import yaml
 
 from bayes_disc.cli import main
-from bayes_disc.diagnostics.diagnosis import run_diagnose
+from bayes_disc.jobs.diagnose import run_diagnose
 from bayes_disc.diagnostics.missing_physics import CANDIDATES, evidence, extend_theta
 from bayes_disc.inference.config import load_config
 from bayes_disc.inference.data import build_problem

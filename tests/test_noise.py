@@ -357,7 +357,7 @@ def test_ar1_and_per_point_run_through_the_outputs(folder):
     log-likelihood = the exact conditional log-likelihood, predictive draws) and summary.json."""
     from bayes_disc.inference.data import build_problem
     from bayes_disc.inference.results import build_inference_data, build_summary
-    from bayes_disc.inference.run import noise_info, noise_words
+    from bayes_disc.inference.describe import noise_info, noise_words
     from bayes_disc.inference.sampler import Chains
     cfg = _config(folder, "r", "flight_options: {a: {noise: {model: ar1, per_point: false}}}")
     problem = build_problem(cfg)
@@ -436,7 +436,7 @@ def test_gaussian_runs_are_warned_of_gross_errors_and_clean_data_are_not(clean, 
     import logging
 
     from bayes_disc.inference.robust import gross_error_advice, suspected_gross_errors
-    from bayes_disc.inference.run import _robust
+    from bayes_disc.jobs.sample import _robust
     rng = np.random.default_rng(22)
     pos = clean.positions + 1.5e-3 * rng.normal(size=clean.positions.shape)
     plain = _problem(replace(clean, positions=pos.copy()))

@@ -12,7 +12,7 @@ import pytest
 import yaml
 
 from bayes_disc.cli import main
-from bayes_disc.diagnostics.diagnosis import run_diagnose
+from bayes_disc.jobs.diagnose import run_diagnose
 from bayes_disc.diagnostics.missing_physics import SHARE_PARTIAL, excess_share
 from bayes_disc.diagnostics.residuals import FlightResiduals, noise_floor, second_difference_variance
 from bayes_disc.inference.config import load_config

@@ -95,11 +95,11 @@ def tiny(tmp_path_factory):
     write_synth(synthesize(SynthSpec(name="s", flights=(f,), seed=3)), d / "flights.csv", d / "truth.json")
     (d / "config.yaml").write_text(CONFIG)
     with pytest.MonkeyPatch.context() as mp:
-        mp.chdir(d)  # `sample` may write reports/<name>.html in the working directory
+        mp.chdir(d)  # nothing may land in the working directory: the report goes with the run
         assert main(["sample", str(d / "config.yaml"), "--no-progress"]) == 0
     run_dir = d / "out"
     # the sample job drew its report's sections in two worker processes (the config's default processes: 2)
-    pooled = (d / "reports" / "tiny.html").read_text(encoding="utf-8")
+    pooled = (d / "out" / "reports" / "tiny.html").read_text(encoding="utf-8")
     pooled_png = {p.name: p.read_bytes() for p in sorted((run_dir / "figures").glob("*.png"))}
     html_path = build_report(run_dir, reports_dir=d / "reports", processes=1, seed=5)  # the sampler's seed, as `sample`
     return {"dir": d, "run": run_dir, "html": html_path, "text": html_path.read_text(encoding="utf-8"),

@@ -1,6 +1,6 @@
 """Simulation-based calibration of the whole inference (``bayes-disc calibrate CAL.yaml``, SPEC §6).
 
-Orchestration at the top of the layers, beside :mod:`bayes_disc.pipeline`: it uses synthetic flights
+Orchestration at the top of the layers, beside :mod:`bayes_disc.jobs`: it uses synthetic flights
 (:mod:`~bayes_disc.observation.synth`), the sampling job (:func:`bayes_disc.api.sample`) and a report page
 (:mod:`bayes_disc.report.calibration`, given plain data). Modules: :mod:`.config` (CAL.yaml),
 :mod:`.stats` (ranks, coverage, uniformity test), :mod:`.replicate` (one data set, one fit: a Dask task),

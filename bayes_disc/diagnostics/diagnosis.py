@@ -30,14 +30,15 @@ evidence with AR(1) noise, whiteness of the AR(1) innovations), and ``diagnosis.
 ``noise`` (``model``, ``rho`` per flight, ``evidence``): "noise correlated, ρ = 0.85; no missing physics"
 when nothing is left, or the terms found under correlated noise.
 
-The HTML report (which includes the diagnosis) is built by :mod:`bayes_disc.pipeline`, not here.
+The ``diagnose`` job (:mod:`bayes_disc.jobs.diagnose`) runs :func:`analyse`, resamples with the accepted terms
+(:func:`refit_config`), writes :func:`diagnosis_record` and rebuilds the report; this module knows nothing of
+sampling runs or reports.
 """
 from __future__ import annotations
 
 import json
 import logging
-import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -46,7 +47,6 @@ from ..inference.config import RunConfig
 from ..inference.data import build_problem, load_run_flights
 from ..inference.inertial import load_run_throws
 from ..inference.leastsq import fit_least_squares, refine_least_squares
-from ..inference.run import RESULT, run_sample
 from ..observation.registry import PHYSICS_TERM, unit
 from ..physics import COEFFICIENT_NAMES
 from ..physics.discrepancy import coefficient_curve
@@ -520,41 +520,57 @@ def _replication_record(c, problem) -> dict | None:
             "acts_in": None if acts is None else [names[k] for k in acts]}
 
 
-def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progress: bool = True,
-                 candidates=None, learn: bool = True) -> dict:
-    """The ``diagnose`` command without its report (module docstring).
+@dataclass
+class Analysis:
+    """The diagnosis of a run before any resampling: the base fit, the candidates judged, the noise model.
+
+    Attributes
+    ----------
+    cfg : RunConfig
+        The configuration the diagnosis was made with (its marker noise AR(1) when that earned its place).
+    diag : Diagnosis
+        Base fit, ranked candidates, accepted terms, final fit.
+    noise : dict or None
+        The ``noise`` record of :func:`correlated_noise` (None when AR(1) noise was not tried).
+    skipped : dict
+        Candidates not tried, with the reason.
+    base_ids : tuple of str
+        The configuration's own physics terms (the base model).
+    problem : Problem
+        The base model's statistical problem (the configuration's own noise model).
+    build_for : callable
+        ``build_for(cfg)`` → ``build(ids)``: the problem of ``cfg`` with the extra term ids.
+    """
+
+    cfg: RunConfig
+    diag: Diagnosis
+    noise: dict | None
+    skipped: dict
+    base_ids: tuple
+    problem: object
+    build_for: object
+
+
+def analyse(cfg: RunConfig, processes: int = 2, candidates=None) -> Analysis:
+    """Fit the base model, rank the candidate terms by ΔBIC and judge correlated noise (module docstring).
 
     Parameters
     ----------
     cfg : RunConfig
-        The validated run configuration; files go to ``cfg.output``.
-    sample : bool
-        Resample (emcee) with the accepted terms into ``<output>/diagnosis_refit``; otherwise the
-        estimates after are least-squares (Laplace) ones.
+        The validated run configuration.
     processes : int
         Parallel candidate fits.
-    progress : bool
-        Show a progress bar while resampling.
     candidates : sequence of str, optional
         The candidate ids to try (default: every one of ``CANDIDATES``); an unknown id is an error.
-    learn : bool
-        When the base model leaves structure, learn a correction (:mod:`.discrepancy`) and report it under
-        ``learned_discrepancy``.
 
     Returns
     -------
-    dict
-        The content of ``diagnosis.json`` (SPEC §6): ``verdict``, ``effects`` ranked best first, RMS per flight
-        before and after [mm] (``rms_before_mm``, ``rms_after_mm``), and the details listed in the module
-        docstring (``words``: the diagnosis in words).
+    Analysis
     """
-    t0 = time.perf_counter()
     wanted = list(CANDIDATES if candidates is None else candidates)
     unknown = [c for c in wanted if c not in CANDIDATES]
     if unknown:
         raise ValueError(f"unknown candidate(s) {unknown}; known: {list(CANDIDATES)}")
-    out = Path(cfg.output)
-    out.mkdir(parents=True, exist_ok=True)
     flights = load_run_flights(cfg)
     throws = load_run_throws(cfg)          # read (and their repairs reported) once, not once per candidate
     base_ids = tuple(cfg.physics)
@@ -563,51 +579,113 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
         return lambda ids: build_problem(c, terms_override=list(ids), flights=flights, throws=throws)
 
     build = build_for(cfg)
-
     problem = build(base_ids)
     logger.info(f"{cfg.name}: {problem.n_flights} flights; base model"
-        + (f" with {', '.join(base_ids)}" if base_ids else "") + "; fitting by least squares")
+                + (f" with {', '.join(base_ids)}" if base_ids else "") + "; fitting by least squares")
     ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
                            seed=cfg.sampler.seed)
     base = model_fit(problem, ls, base_ids)
     logger.info("base RMS " + rms_text(base.rms))
-    candidates, skipped = applicable_candidates(problem, [c for c in wanted if c not in base_ids])
+    tried, skipped = applicable_candidates(problem, [c for c in wanted if c not in base_ids])
     for c, why in skipped.items():
         logger.info(f"not trying {c}: {why}")
-    logger.info(f"ranking {len(candidates)} candidates by ΔBIC (each a least-squares refit):")
+    logger.info(f"ranking {len(tried)} candidates by ΔBIC (each a least-squares refit):")
     diag = diagnose(base, build, processes=processes, max_nfev=cfg.least_squares.max_nfev,
-                    candidates=candidates, log=logger.info)
-    noise = correlated_noise(cfg, diag, build_for, candidates, processes=processes)
+                    candidates=tried, log=logger.info)
+    noise = correlated_noise(cfg, diag, build_for, tried, processes=processes)
     if noise is not None:
         diag, noise, cfg = noise
-    base = diag.base                      # the base model's best optimum (it may have been refitted)
-    final = diag.final
-    result = {"verdict": diag.verdict, "effects": [], "rms_before_mm": base.rms_mm, "rms_after_mm": final.rms_mm,
-              "rms_before": base.rms, "rms_after": final.rms, "skipped_candidates": skipped}
-    before_est = _ls_estimates(base, COEFFICIENT_NAMES)
-    if _sampled_base(out, base_ids):
-        before_est = _posterior_estimates(out, COEFFICIENT_NAMES)      # the `sample` run of the same model
-    after_est = _ls_estimates(final, COEFFICIENT_NAMES + tuple(final.problem.ext_names))
-    refit_dir = out / "diagnosis_refit"
-    if diag.accepted and sample:
-        physics = dict(cfg.physics)
-        theta = dict(zip(final.problem.names, final.ls.theta))
-        for c in diag.accepted:
-            physics[c.id] = {n: float(theta[n]) for n in unit_parameter_names(c.id, problem.marker_ids)}
-        refit_cfg = replace(cfg, name=f"{cfg.name}_refit", output=refit_dir, physics=physics)
-        logger.info(f"resampling with {', '.join(c.id for c in diag.accepted)} → {refit_dir}")
-        run_sample(refit_cfg, progress=progress)
-        after_est = _posterior_estimates(refit_dir, COEFFICIENT_NAMES + tuple(final.problem.ext_names))
+    return Analysis(cfg, diag, noise, skipped, base_ids, problem, build_for)
+
+
+def estimates_before(analysis: Analysis, out: Path) -> dict:
+    """The ten coefficients before the accepted terms: the posterior of a ``sample`` run of the base model in
+    ``out`` when there is one, else the base model's least-squares (Laplace) estimates."""
+    if _sampled_base(out, analysis.base_ids):
+        return _posterior_estimates(out, COEFFICIENT_NAMES)      # the `sample` run of the same model
+    return _ls_estimates(analysis.diag.base, COEFFICIENT_NAMES)
+
+
+def _after_names(analysis: Analysis) -> tuple:
+    return COEFFICIENT_NAMES + tuple(analysis.diag.final.problem.ext_names)
+
+
+def estimates_after(analysis: Analysis, refit_dir: Path | None = None) -> dict:
+    """The coefficients and the accepted terms' parameters after: from the resampled run in ``refit_dir``,
+    or the final model's least-squares (Laplace) estimates."""
+    if refit_dir is not None:
+        return _posterior_estimates(refit_dir, _after_names(analysis))
+    return _ls_estimates(analysis.diag.final, _after_names(analysis))
+
+
+def refit_config(analysis: Analysis, output: Path) -> RunConfig:
+    """The run configuration with the accepted terms at their least-squares values, written to ``output``
+    and named ``<name>_refit``: what the diagnosis resamples."""
+    cfg, final = analysis.cfg, analysis.diag.final
+    physics = dict(cfg.physics)
+    theta = dict(zip(final.problem.names, final.ls.theta))
+    for c in analysis.diag.accepted:
+        physics[c.id] = {n: float(theta[n]) for n in unit_parameter_names(c.id, analysis.problem.marker_ids)}
+    return replace(cfg, name=f"{cfg.name}_refit", output=output, physics=physics)
+
+
+def _effects(analysis: Analysis, after_est: dict) -> list[dict]:
+    """The accepted effects ranked best first: {id, evidence, estimate, where, title, status, ...}."""
+    diag, problem = analysis.diag, analysis.problem
+    base = diag.base
+    effects = []
     base_names = set(base.problem.ext_names)
     for rank, c in enumerate(diag.accepted):
         new = [n for n in c.fit.problem.ext_names if n not in base_names]
         base_names |= set(new)
         fp = fingerprint(base if rank == 0 else diag.accepted[rank - 1].fit, c.fit, new)
-        result["effects"].append({"id": c.id, "evidence": c.delta_bic, "estimate": {n: after_est[n] for n in new},
-                                  "where": describe_where(fp, problem.n_flights), "title": _title(c.id),
-                                  "status": "partially_explains" if diag.partial else c.status,
-                                  "share_explained": c.share, "fingerprint": fp})
-    result["effects"].sort(key=lambda e: -e["evidence"])
+        effects.append({"id": c.id, "evidence": c.delta_bic, "estimate": {n: after_est[n] for n in new},
+                        "where": describe_where(fp, problem.n_flights), "title": _title(c.id),
+                        "status": "partially_explains" if diag.partial else c.status,
+                        "share_explained": c.share, "fingerprint": fp})
+    effects.sort(key=lambda e: -e["evidence"])
+    return effects
+
+
+def _noise_records(base: ModelFit, final: ModelFit) -> dict:
+    """Marker σ before/after [mm], every noise group's σ before/after, and the noise floor."""
+    sig_b, sig_a = noise_scales(base), noise_scales(final)
+    marker_sigma = {f"sigma_{f}": f for f in base.rms_mm}
+    floor = noise_floor(base.residuals, base.problem.n_groups)
+    return {"noise_sigma_mm": {"before": {f: sig_b[s]["value"] * 1e3 for s, f in marker_sigma.items()},
+                               "after": {f: sig_a[s]["value"] * 1e3 for s, f in marker_sigma.items()}},
+            "noise_sigma": {"before": sig_b, "after": sig_a},
+            "noise_floor": {n: {"value": float(v), "unit": sig_b[n]["unit"]}
+                            for n, v in zip(base.problem.sigma_names, floor)}}
+
+
+def diagnosis_record(analysis: Analysis, before_est: dict, after_est: dict, refit_dir: Path | None,
+                     learn: bool = True) -> dict:
+    """The content of ``diagnosis.json`` (module docstring), the diagnosis in words included.
+
+    Parameters
+    ----------
+    analysis : Analysis
+        The diagnosis (:func:`analyse`).
+    before_est, after_est : dict
+        The estimates before and after the accepted terms (:func:`estimates_before`, :func:`estimates_after`).
+    refit_dir : Path or None
+        The resampled run with the accepted terms, or None when nothing was resampled.
+    learn : bool
+        When the base model leaves structure, learn a correction (:mod:`.discrepancy`) and report it under
+        ``learned_discrepancy``.
+
+    Returns
+    -------
+    dict
+        ``verdict``, ``effects`` ranked best first, RMS per flight before and after [mm] (``rms_before_mm``,
+        ``rms_after_mm``) and the details listed in the module docstring (``words``: the diagnosis in words).
+    """
+    diag, cfg, problem = analysis.diag, analysis.cfg, analysis.problem
+    base, final = diag.base, diag.final         # the base model's best optimum (it may have been refitted)
+    result = {"verdict": diag.verdict, "effects": _effects(analysis, after_est), "rms_before_mm": base.rms_mm,
+              "rms_after_mm": final.rms_mm, "rms_before": base.rms, "rms_after": final.rms,
+              "skipped_candidates": analysis.skipped}
     result["unexplained"] = _unexplained(diag)
     result["partial_explanation"] = ({"ids": [c.id for c in diag.accepted], "share_explained": diag.share,
                                       "evidence": float(sum(c.delta_bic for c in diag.accepted)),
@@ -622,35 +700,30 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
     result["whiteness_before"] = _whiteness(base)
     result["whiteness_after"] = _whiteness(final)
     result["localisation_before"] = base.localisation
-    sig_b, sig_a = noise_scales(base), noise_scales(final)
-    marker_sigma = {f"sigma_{f}": f for f in base.rms_mm}
-    result["noise_sigma_mm"] = {"before": {f: sig_b[s]["value"] * 1e3 for s, f in marker_sigma.items()},
-                                "after": {f: sig_a[s]["value"] * 1e3 for s, f in marker_sigma.items()}}
-    result["noise_sigma"] = {"before": sig_b, "after": sig_a}
-    floor = noise_floor(base.residuals, base.problem.n_groups)
-    result["noise_floor"] = {n: {"value": float(v), "unit": sig_b[n]["unit"]}
-                             for n, v in zip(base.problem.sigma_names, floor)}
+    result.update(_noise_records(base, final))
     result["coefficients_before"] = before_est
     result["coefficients_after"] = after_est
-    result["model"] = {"base": list(base_ids), "final": list(final.ids)}
-    if noise is not None:
-        result["noise"] = noise
+    result["model"] = {"base": list(analysis.base_ids), "final": list(final.ids)}
+    if analysis.noise is not None:
+        result["noise"] = analysis.noise
     result["settings"] = {"evidence_threshold_delta_bic": EVIDENCE_THRESHOLD, "share_partial": SHARE_PARTIAL,
-                          "resampled": bool(diag.accepted and sample),
-                          "refit_run": str(refit_dir) if diag.accepted and sample else None}
+                          "resampled": refit_dir is not None,
+                          "refit_run": str(refit_dir) if refit_dir is not None else None}
     result["learned_discrepancy"] = None
     if learn and any(structured(base).values()):
         logger.info("the base model leaves structure: learning a correction in height, α and spin")
-        learned = learn_discrepancy(base, build_for(cfg), max_nfev=cfg.least_squares.max_nfev, log=logger.info)
+        learned = learn_discrepancy(base, analysis.build_for(cfg), max_nfev=cfg.least_squares.max_nfev,
+                                    log=logger.info)
         result["learned_discrepancy"] = learned_record(learned, diag) if learned is not None else {
             "selected": 0, "reason": f"no column of the correction reaches |z| ≥ {Z_KEEP:.0f}"}
     result["words"] = words(result)
-    result["wall_time_s"] = time.perf_counter() - t0
+    return result
+
+
+def write_diagnosis(out: Path, result: dict, diag: Diagnosis) -> None:
+    """``<out>/diagnosis.json`` (NaN and ±inf as null) and ``<out>/diagnosis_residuals.npz``."""
     (out / "diagnosis.json").write_text(json.dumps(_finite(result), indent=1, allow_nan=False))
     save_series(out / "diagnosis_residuals.npz", diag)
-    logger.info(result["words"], extra=RESULT)
-    logger.info(f"wrote {out / 'diagnosis.json'} ({result['wall_time_s']:.0f} s)")
-    return result
 
 
 def _finite(x):

@@ -33,6 +33,8 @@ from . import arctan
 from .codegen import KernelSource
 
 ENV_CACHE_DIR = "BAYES_DISC_CACHE_DIR"
+#: said when a kernel is compiled without the disk cache
+COMPILING_IN_MEMORY = "compiling the simulator (about half a minute; not cached: every new process compiles it)"
 log = logging.getLogger(__name__)
 
 
@@ -137,6 +139,24 @@ def _import_file(path: Path, name: str):
     return module
 
 
+def is_compiled(folder: Path, key: str) -> bool:
+    """Whether numba's cache beside the kernel ``bd_kernel_<key>.py`` in ``folder`` holds its machine code (the
+    index file ``__pycache__/bd_kernel_<key>.integrate-*.nbi`` of its entry point): loading it compiles nothing.
+
+    Parameters
+    ----------
+    folder : Path
+        The kernels' folder of the cache root.
+    key : str
+        The kernel's key (:func:`kernel_key`).
+
+    Returns
+    -------
+    bool
+    """
+    return any((folder / "__pycache__").glob(f"bd_kernel_{key}.integrate-*.nbi"))
+
+
 def compile_in_memory(source: KernelSource):
     """The ``integrate`` function of a kernel compiled without any disk cache.
 
@@ -171,12 +191,14 @@ def load_kernel(cached: KernelSource, uncached: KernelSource):
         warnings.warn("a physics term's hooks cannot be imported by name (defined in __main__ or inside a "
                       "function): its kernel is compiled in memory and not cached on disk", RuntimeWarning,
                       stacklevel=3)
+        log.info(COMPILING_IN_MEMORY)
         return compile_in_memory(uncached)
     try:
         key = kernel_key(cached)
     except (OSError, TypeError) as exc:
         warnings.warn(f"the source of a physics term's hooks is not available ({exc}): its kernel is compiled in "
                       "memory and not cached on disk", RuntimeWarning, stacklevel=3)
+        log.info(COMPILING_IN_MEMORY)
         return compile_in_memory(uncached)
     folder = cache_root() / "kernels"
     path = folder / f"bd_kernel_{key}.py"
@@ -188,7 +210,11 @@ def load_kernel(cached: KernelSource, uncached: KernelSource):
         msg = (f"kernel cache directory {folder} is not writable ({exc}); compiling in memory (set "
                f"{ENV_CACHE_DIR} to a writable directory to keep compiled kernels between processes)")
         warnings.warn(msg, RuntimeWarning, stacklevel=3)
+        log.info(COMPILING_IN_MEMORY)
         return compile_in_memory(uncached)
+    if not is_compiled(folder, key):
+        log.info(f"compiling the simulator (once, about half a minute; its machine code is then kept in {folder} "
+                 "for every later run)")
     name = f"bayes_disc_kernel_{key}"
     module = sys.modules.get(name) or _import_file(path, name)
     return module.integrate

@@ -175,7 +175,7 @@ class ReportContext:
             problem = with_saved_flags(build_problem(self.config), self.run.run_dir)   # robust runs: cleaned data
         except (ConfigError, MarkerFileError, FileNotFoundError) as e:
             raise ReportInputError(self.run.config_path, f"cannot rebuild the run's data: {e}") from None
-        from ..inference.run import flight_info
+        from ..inference.describe import flight_info
         strip = lambda d: {k: {a: b for a, b in v.items() if a != "file"} for k, v in d.items()}  # noqa: E731
         now, then = strip(flight_info(problem)), strip(self.summary["flights"])
         if now != then:

@@ -86,7 +86,11 @@ def build_sections(ctx: ReportContext, builders: list[SectionBuilder] | None = N
     return sections
 
 
-def build_report(run_dir, reports_dir=Path("reports"), builders: list[SectionBuilder] | None = None,
+#: sub-folder of a run folder that holds its HTML report ``<name>.html`` by default
+REPORTS_DIR = "reports"
+
+
+def build_report(run_dir, reports_dir=None, builders: list[SectionBuilder] | None = None,
                  seed: int = 0, processes: int = 2) -> Path:
     """Write ``<reports_dir>/<name>.html`` (self-contained) and ``<run_dir>/figures/*.png|pdf``.
 
@@ -94,9 +98,9 @@ def build_report(run_dir, reports_dir=Path("reports"), builders: list[SectionBui
     ----------
     run_dir : str or Path
         A ``bayes-disc sample`` output folder (summary.json, posterior.nc, run_info.json).
-    reports_dir : str or Path
-        Folder of the HTML file; relative paths resolve against the current working directory
-        (default: ``reports/<name>.html``).
+    reports_dir : str or Path, optional
+        Folder of the HTML file; relative paths resolve against the current working directory (default:
+        ``<run_dir>/reports``, so that the report goes with its run).
     builders : list of callable, optional
         Section builders (default :func:`~.builders.default_builders`).
     seed : int
@@ -121,10 +125,10 @@ def build_report(run_dir, reports_dir=Path("reports"), builders: list[SectionBui
         warnings.simplefilter("ignore", RuntimeWarning)     # all-NaN slices of failed lanes, NaN τ
         sections = build_sections(ctx, builders, processes)
     name = run.summary["name"]
-    out = Path(reports_dir) / f"{name}.html"
+    out = (Path(run_dir) / REPORTS_DIR if reports_dir is None else Path(reports_dir)) / f"{name}.html"
     out.parent.mkdir(parents=True, exist_ok=True)
     elapsed = time.perf_counter() - t0
-    subtitle = f"Flying-disc coefficients from tracked flights (bayes-disc). Run folder: {Path(run_dir).resolve()}"
+    subtitle = f"Flying-disc coefficients from tracked flights (bayes-disc). Run folder: {run_dir}"
     html = render_document(f"{name}: bayes-disc report", subtitle, sections,
                            footer=f"Report built in {elapsed:.1f} s; figures in {ctx.figure_dir}.")
     out.write_text(html, encoding="utf-8")

@@ -3,132 +3,51 @@
 Writes summary.json, posterior.nc, run_info.json and the least-squares result into the run's output folder
 (and ``flagged.json``, the points judged outliers and frames judged label-swapped, and
 ``judgement_average.json``, the posterior averaged over that judgement, for ``robust`` marker noise:
-:mod:`.robust`).
-The HTML report is not this module's business: :mod:`bayes_disc.pipeline` runs this job, then the report.
+:mod:`bayes_disc.inference.robust`).
+:func:`sample` runs this job, then the run's HTML report (:func:`.outputs.build_run_report`).
 Progress goes to the module's logger (INFO): a line when each stage starts and one when it ends, with
 its duration (:func:`stage`); a line per least-squares start; a bar over the profile likelihoods and one
 of the progress toward convergence while sampling (on a terminal; log lines otherwise). The results
 table and the convergence line are INFO records marked ``result=True`` (the command line prints those
 on stdout).
 
-``resume=True`` continues from the chain files (:func:`.sampler.run_sampler`) with the saved least-squares
+``resume=True`` continues from the chain files (:func:`bayes_disc.inference.sampler.run_sampler`) with the saved least-squares
 result and proposals; it refuses a configuration that no longer describes the saved run
 (:func:`check_same_run`).
 """
 from __future__ import annotations
 
-import contextlib
 import json
 import logging
 import time
 from dataclasses import asdict
 from pathlib import Path
-from types import MappingProxyType
-from typing import Iterator
 
 import numpy as np
 
+from ..inference.config import RunConfig
+from ..inference.data import build_problem
+from ..inference.describe import data_words, flight_info, noise_info, noise_words
+from ..inference.inertial import load_run_throws
+from ..inference.leastsq import START_FLIGHTS, fit_least_squares, noise_text
+from ..inference.profile import MAX_LOWER_REFITS, lowest_point, profiles_through_lowest
+from ..inference.proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
+from ..inference.results import build_inference_data, build_summary, format_table, prior_record, writing_posterior
+from ..inference.robust import (FLAGGED, JUDGEMENT_AVERAGE, average_over_judgement, gross_error_advice,
+                                robust_flights, robust_refit, suspected_gross_errors, with_saved_flags)
+from ..inference.sampler import n_walkers, run_sampler, saved_steps
+from ..inference.versions import software_versions
 from ..observation.config_io import ConfigError
-from .config import RunConfig
-from ..observation.models import MarkerPositions
-from .data import build_problem
-from .inertial import load_run_throws
-from .leastsq import START_FLIGHTS, fit_least_squares, noise_text
-from .results import build_inference_data, build_summary, format_table, prior_record, writing_posterior
-from .profile import MAX_LOWER_REFITS, lowest_point, profiles_through_lowest
-from .robust import (FLAGGED, JUDGEMENT_AVERAGE, average_over_judgement, gross_error_advice, robust_flights,
-                     robust_refit, suspected_gross_errors, with_saved_flags)
-from .proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
-from .sampler import n_walkers, run_sampler, saved_steps
-from .versions import software_versions
+from .outputs import Outcome, build_run_report
+from .progress import RESULT, stage
 
 logger = logging.getLogger(__name__)
-#: ``extra`` of log records that are results (tables), not progress
-RESULT = MappingProxyType({"result": True})
 #: what a run's chains were sampled for (written before sampling, checked on resume), in ``<output>/chains``
 RUN_KEY = "run_key.json"
 #: sampler settings that may change on resume (the stopping rule, the cap, parallelism)
 RESUMABLE_SETTINGS = ("max_steps", "check_every", "min_steps", "n_tau", "rhat", "ess", "processes")
 #: least-squares files a resume reuses
 LEAST_SQUARES_FILES = ("least_squares.json", "least_squares_theta.npy", "least_squares_cov.npy")
-
-
-class Stage:
-    """A stage of a job, timed from its creation; ``result`` is added to the line logged at its end."""
-
-    def __init__(self, name: str):
-        self.name, self.result, self.t0 = name, "", time.perf_counter()
-
-    @property
-    def elapsed(self) -> float:
-        """Seconds since the stage started."""
-        return time.perf_counter() - self.t0
-
-
-@contextlib.contextmanager
-def stage(name: str, what: str = "") -> Iterator[Stage]:
-    """Log (INFO) the start of a stage, and its end with the duration and the stage's ``result``.
-
-    Parameters
-    ----------
-    name : str
-        The stage, e.g. ``"least squares"``.
-    what : str
-        Details for the start line.
-
-    Yields
-    ------
-    Stage
-        Set ``.result`` to words for the end line. When the block raises, no end line is logged.
-    """
-    logger.info(f"{name}{': ' + what if what else ''} …")
-    s = Stage(name)
-    yield s
-    logger.info(f"{name} done in {s.elapsed:.1f} s" + (f": {s.result}" if s.result else ""))
-
-
-def flight_info(problem) -> dict:
-    """Per flight: its recordings (marker samples and points; inertial rows) and their time span."""
-    out = {}
-    for k, f in enumerate(problem.flights):
-        rec = {"file": f.source}
-        for c in problem.channels[k]:
-            if isinstance(c, MarkerPositions):
-                rec.update(samples=int(c.data.times.size), points=int(c.data.n_points),
-                           t_start=float(c.data.times[0]), t_end=float(c.data.times[-1]))
-            else:
-                rec.update(inertial_rows=int(len(c.row_offsets)), inertial_values=int(c.group_index.size),
-                           rows_since_release=int(c.row_offsets[-1]))
-        out[f.name] = rec
-    return out
-
-
-def noise_info(problem) -> dict:
-    """Per marker flight: its noise model (:meth:`~bayes_disc.observation.models.noise.MarkerNoise.describe`:
-    ``model``, ``per_point`` (``sigma_m``, ``covariance`` or null), ``reference_sigma_m`` ḡ [m] (σ_f / ḡ is
-    the scale factor of the stated per-point errors) and the unit's own parameters)."""
-    return {f.name: c.noise.describe() for f, ch in zip(problem.flights, problem.channels) for c in ch
-            if isinstance(c, MarkerPositions)}
-
-
-def noise_words(info: dict) -> str:
-    """"flight a: ar1, per-point errors from sigma_m (ḡ = 2.1 mm)" per flight, for the log."""
-    out = []
-    for name, d in info.items():
-        pp = (f", per-point errors from {d['per_point']} (geometric mean {d['reference_sigma_m'] * 1e3:.3g} mm)"
-              if d["per_point"] else ", one σ for every point")
-        out.append(f"{name}: {d['model']}{pp}")
-    return "; ".join(out)
-
-
-def _data_words(problem) -> str:
-    """"3 flights, 1200 marker points, 5400 inertial values"."""
-    markers = sum(int(c.data.n_points) for ch in problem.channels for c in ch if isinstance(c, MarkerPositions))
-    inertial = sum(int(c.group_index.size) for ch in problem.channels for c in ch
-                   if not isinstance(c, MarkerPositions))
-    words = [f"{problem.n_flights} flights"] + ([f"{markers} marker points"] if markers else []) \
-        + ([f"{inertial} inertial values"] if inertial else [])
-    return ", ".join(words)
 
 
 def run_key(cfg: RunConfig, problem) -> dict:
@@ -425,7 +344,7 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
         if resume and robust_flights(problem) and (out / FLAGGED).is_file() and (out / "chains" / RUN_KEY).is_file():
             problem = with_saved_flags(problem, out)
             logger.info(f"resume: the saved judgement of outliers and label swaps ({out / FLAGGED}) is applied")
-        st.result = f"{cfg.name}: {_data_words(problem)}, {problem.dim} parameters"
+        st.result = f"{cfg.name}: {data_words(problem)}, {problem.dim} parameters"
         if noise_info(problem):
             logger.info(f"marker noise: {noise_words(noise_info(problem))}")
         for t in throws:
@@ -491,3 +410,29 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
         f"{run_info['wall_time_s']:.0f} s", extra=RESULT)
     logger.info(f"wrote {out / 'summary.json'}, {out / 'posterior.nc'}")
     return summary
+
+
+def sample(cfg: RunConfig, *, resume: bool = False, progress: bool = True, report: bool = True) -> Outcome:
+    """``bayes-disc sample``: sample the posterior (:func:`run_sample`), then build the run's HTML report
+    ``<output>/reports/<name>.html``.
+
+    Parameters
+    ----------
+    cfg : RunConfig
+        The validated run configuration.
+    resume : bool
+        Continue an interrupted run from its chain files.
+    progress : bool
+        Show progress bars (least-squares starts and stages are logged in any case).
+    report : bool
+        Build the HTML report after sampling.
+
+    Returns
+    -------
+    Outcome
+        ``result``: the summary.json content; ``report``: the HTML file (None without ``report``).
+    """
+    logger.debug(f"sample: configuration {cfg.path}, output {cfg.output}")
+    summary = run_sample(cfg, resume=resume, progress=progress)
+    path = build_run_report(cfg.output, cfg.sampler.seed, cfg.sampler.processes) if report else None
+    return Outcome(summary, path)
