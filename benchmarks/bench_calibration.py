@@ -1,13 +1,13 @@
-"""Benchmark of one replicate of the four-flight calibration campaign (runs/calibration/cal4.yaml).
+"""Benchmark of one replicate of the four-flight calibration campaign (runs/calibration/four_flights_white.yaml).
 
 Runs replicate ``--index`` (default 0) of the campaign in this process, exactly as a Dask worker runs it
 (:func:`bayes_disc.calibration.replicate.run_replicate`: truth, synthetic flights, least squares and the
 sampler with ``processes: 1``, ranks), after compiling the kernels once (a worker pays that once, not
 per replicate). Prints the replicate's wall time, its convergence, and what the whole campaign costs on
 ``--workers`` workers (N × time / workers). The full campaign itself is
-``bayes-disc calibrate runs/calibration/cal4.yaml --workers W``; this script does not run it.
+``bayes-disc calibrate runs/calibration/four_flights_white.yaml --workers W``; this script does not run it.
 
-    python benchmarks/bench_calibration.py [--config runs/calibration/cal4.yaml] [--index 0] [--workers 2] [--json]
+    python benchmarks/bench_calibration.py [--config runs/calibration/four_flights_white.yaml] [--index 0] [--workers 2] [--json]
 """
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ def warm_up(cal) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--config", default=str(ROOT / "runs/calibration/cal4.yaml"))
+    ap.add_argument("--config", default=str(ROOT / "runs/calibration/four_flights_white.yaml"))
     ap.add_argument("--index", type=int, default=0)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", action="store_true")

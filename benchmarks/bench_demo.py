@@ -1,4 +1,4 @@
-"""Benchmark of the demo job as a user waits for it (issue 18's "four-flight demo in ≤ 60 s"): the command
+"""Benchmark of the demo job as a user waits for it (target: the four-flight demo in ≤ 60 s): the command
 ``bayes-disc sample runs/demo/config.yaml --output DIR`` in a fresh process, imports, least squares,
 profiles, sampling, outputs and the HTML report included (the compiled kernel cached on disk, as after the
 first run).

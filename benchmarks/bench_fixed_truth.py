@@ -1,4 +1,4 @@
-"""Interval width at one fixed truth (issue 16): the noise alone redrawn, least squares each time.
+"""Interval width at one fixed truth: the noise alone redrawn, least squares each time.
 
 Replicate I of a calibration campaign fixes the coefficients and every flight's launch; the synthetic marker
 noise is then drawn K times (synth seeds 5000 … 5000 + K − 1), optionally scaled by ``--scale``, and each data
@@ -8,7 +8,7 @@ when given). Printed every five fits: mean and sd over the fits of z = (θ̃ −
 In the linear regime, with the noise model's whitening exact and the optimum found, sd(z) ≤ 1 (the prior can
 only shrink it); equal z's at ``--scale 1`` and ``--scale 0.1`` (same seeds) show the regime is linear.
 
-    python benchmarks/bench_fixed_truth.py runs/calibration/cal4_ar1.yaml [--replicate 0] [--fits 40]
+    python benchmarks/bench_fixed_truth.py runs/calibration/four_flights_ar1.yaml [--replicate 0] [--fits 40]
                                            [--scale 1.0] [--fix-rho 0.85]
 """
 from __future__ import annotations

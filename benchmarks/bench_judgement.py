@@ -1,4 +1,4 @@
-"""Benchmark of the posterior averaged over the robust model's judgement (issue 16): what averaging over
+"""Benchmark of the posterior averaged over the robust model's judgement: what averaging over
 every outlier/swap judgement changes, and what it costs.
 
 Four synthetic flights (0.6 s each at 120 Hz, 1.5 mm noise; the slow robust test's launches) get gross

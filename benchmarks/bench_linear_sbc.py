@@ -1,4 +1,4 @@
-"""Calibration of the likelihood alone, over many data sets: a linearised SBC at the truth (issue 16).
+"""Calibration of the likelihood alone, over many data sets: a linearised SBC at the truth.
 
 A calibration campaign (``bayes-disc calibrate``) runs the sampler on every replicate and costs minutes per
 data set. This benchmark makes the same replicates' data (:func:`replicate_data`: replicate i's truth, launches
@@ -31,7 +31,7 @@ the coefficients' posterior mean and sd are the mixture's. ``--fit`` instead min
 the flights' σ re-estimated, as ``least_squares.json``) and standardises with the Laplace covariance there.
 Where the campaign has a record of the replicate, its posterior z = (θ̃ − mean)/sd is compared.
 
-    python benchmarks/bench_linear_sbc.py runs/calibration/cal4_ar1.yaml [--first 0] [--replicates 300]
+    python benchmarks/bench_linear_sbc.py runs/calibration/four_flights_ar1.yaml [--first 0] [--replicates 300]
                                           [--rho free|held|integrated] [--fit] [--json]
 """
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Benchmark of reading and validating a large SPEC §4 marker file: the cost must be linear in rows.
+"""Benchmark of reading and validating a large marker file (docs/data-formats.md): the cost must be linear in rows.
 
 Writes, in a temporary folder, a file of ``--rows`` rows (default 1e6; 3 markers per sample, 120 Hz,
 coordinates with 9 decimals as :func:`write_marker_csv` writes them) split into ``--flights`` flights

@@ -1,4 +1,4 @@
-"""Benchmark of campaign scale (issue 18): how least squares, profile likelihoods and sampling grow with
+"""Benchmark of campaign scale: how least squares, profile likelihoods and sampling grow with
 the number of flights.
 
 For each flight count (default 4, 8, 12, 24) a synthetic data set is made from the demo's four kinds of
@@ -15,7 +15,7 @@ for is timed in this process:
 * sampling to the stopping rule (R-hat < 1.01, bulk ESS ≥ 400 for every coefficient, N/τ ≥ 10, at least
   ``min_steps``) or the cap; also reported, the time to the first convergence check that met R-hat < 1.01
   for every parameter and bulk ESS ≥ 400 for every coefficient (``rhat_ess_total_s``, from the check's
-  ``elapsed_s``), and to the first that met the issue's criterion for the coefficients alone, R-hat < 1.01
+  ``elapsed_s``), and to the first that met the criterion for the coefficients alone, R-hat < 1.01
   and bulk ESS ≥ 400 for every coefficient (``coef_total_s``). The checks come every ``check_every`` (50)
   steps, so these times move in steps of that much sampling.
 
@@ -89,7 +89,7 @@ def peak_mb() -> float:
 
 
 def dense_fit_time(problem, x0, sigma, max_nfev: int) -> tuple[float, float, int]:
-    """One start of scipy's dense trust-region reflective fit (the solver used before issue 18)."""
+    """One start of scipy's dense trust-region reflective fit (for comparison with the block-arrow solver)."""
     from scipy.optimize import least_squares
     t0 = time.perf_counter()
     res = least_squares(whitened_residuals, x0, jac=whitened_jacobian, args=(problem, sigma), method="trf",
@@ -139,7 +139,7 @@ def one_case(n: int, seed: int, sampler: str, dense: bool, tmp: Path) -> dict:
     row.update(tau_max_coefficients=float(np.nanmax(tau[:problem.ic_start])),
                tau_max_initial_conditions=float(np.nanmax(tau[problem.ic_start:])))
     row["total_s"] = row["least_squares_s"] + row["profiles_s"] + row["sampling_s"]
-    # the first check at which R-hat < 1.01 (of every parameter: rhat_ess; of the coefficients, the issue's
+    # the first check at which R-hat < 1.01 (of every parameter: rhat_ess; of the coefficients, the scale
     # criterion: coef) and every coefficient's bulk ESS ≥ 400, without the sampler's N/τ ≥ 10 and min_steps
     for prefix, rhat_key in (("rhat_ess", "rhat_max"), ("coef", "rhat_max_coef")):
         met = [h for h in last if h[rhat_key] < cfg.sampler.rhat and h["ess_min_coef"] >= cfg.sampler.ess]

@@ -8,12 +8,12 @@ Reports, in one run:
   :func:`simulate_reference` (solve_ivp DOP853, rtol = atol = 1e-12, one flight per call);
   medians over repetitions of ``time.perf_counter`` (compile time excluded: warm-up calls first);
 * the ratios solve_ivp / kernel;
-* the maximum marker error [m] of both integrators against every SPEC §3 case in the reference
+* the maximum marker error [m] of both integrators against every reference case (docs/conventions.md) in the reference
   folder (``<repo>/../shared/reference`` unless ``--reference DIR``), on the exact grid k / rate.
 
 Usage: ``python benchmarks/bench_simulator.py [--reference DIR] [--json] [--batch N] [--repeats N]
 [--method NAME]``. Prints a table, or one JSON object with ``--json``; exit status 1 if a reference case
-misses the SPEC tolerance. Takes about 30–60 s (compilation ≈ 10–15 s and the solve_ivp runs ≈ 10 s
+misses the 1e-5 m tolerance. Takes about 30–60 s (compilation ≈ 10–15 s and the solve_ivp runs ≈ 10 s
 included). Timings on a shared machine vary with its load, which is reported alongside.
 """
 from __future__ import annotations
@@ -36,12 +36,12 @@ if str(REPO) not in sys.path:
 from bayes_disc.physics import (Coefficients, Disc, Environment, SimulatorSettings, simulate,  # noqa: E402
                                 simulate_reference)
 
-TOLERANCE_M = 1e-5          # SPEC §3
+TOLERANCE_M = 1e-5          # reference cases must be reproduced to 0.01 mm
 FLIGHT_S, RATE_HZ = 2.0, 120.0
 
 
 def load_case(json_path: Path) -> dict:
-    """A SPEC §3 case: constants, coefficients, initial state, markers and the reference marker paths
+    """A reference case: constants, coefficients, initial state, markers and the reference marker paths
     (n, n_markers, 3) from NAME_markers.csv on the exact grid k / rate."""
     meta = json.loads(json_path.read_text())
     d = meta["disc"]
@@ -151,12 +151,12 @@ def print_table(r: dict) -> None:
     print(f"{'max marker error [m]':28s}{'kernel':>12s}{'solve_ivp':>12s}")
     for name, e in r["max_marker_error_m"]["kernel"].items():
         print(f"{name:28s}{e:12.2e}{r['max_marker_error_m']['solve_ivp'][name]:12.2e}")
-    print(f"SPEC §3 tolerance {r['tolerance_m']:g} m: {'PASS' if r['pass'] else 'FAIL'}")
+    print(f"reference tolerance {r['tolerance_m']:g} m: {'PASS' if r['pass'] else 'FAIL'}")
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--reference", type=Path, default=DEFAULT_REFERENCE, help="folder of SPEC §3 cases")
+    ap.add_argument("--reference", type=Path, default=DEFAULT_REFERENCE, help="folder of reference cases")
     ap.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     ap.add_argument("--batch", type=int, default=1024, help="flights per batched call (default 1024)")
     ap.add_argument("--repeats", type=int, default=7, help="batched repetitions (single lane: 10×)")

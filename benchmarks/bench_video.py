@@ -22,7 +22,7 @@ from bayes_disc.video.detection import DetectionConfig, detect_full, detect_roi
 from bayes_disc.video.render import Renderer
 from bayes_disc.video.scenes import standard_spec
 
-#: target of the issue: detection frames per second per camera in ROI mode
+#: target: detection frames per second per camera in ROI mode
 TARGET_ROI_FPS = 500.0
 
 
