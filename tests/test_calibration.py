@@ -161,18 +161,18 @@ def test_good_cal_yaml_reads(tmp_path):
 
 def test_truths_drawn_from_an_around_prior_are_the_fits_prior():
     """Exact SBC: with ``truth.draw: prior`` the campaign draws from the prior the fit will use, also when
-    that prior is an ``around`` prior given under ``run.prior``; the shipped cal4 campaign is of this kind."""
+    that prior is an ``around`` prior given under ``run.prior``; the shipped four_flights_white campaign is of this kind."""
     from bayes_disc.inference.priors import coefficient_prior
     from bayes_disc.physics import literature_coefficients
-    cal = load_cal_config(Path(__file__).parents[1] / "runs/calibration/cal4.yaml")
+    cal = load_cal_config(Path(__file__).parents[1] / "runs/calibration/four_flights_white.yaml")
     assert cal.truth.draw == "prior"
     hh = literature_coefficients("hummel2002").as_dict()
     assert cal.truth.values == pytest.approx(hh)
     assert cal.truth.sd == pytest.approx({k: 0.1 * abs(v) for k, v in hh.items()})
     from bayes_disc.inference.config import config_from_mapping
-    run = config_from_mapping({**cal.run, "name": "r", "flights": [{"file": "cal4.yaml"}],
+    run = config_from_mapping({**cal.run, "name": "r", "flights": [{"file": "four_flights_white.yaml"}],
                                "markers": {"0": [0.1, 0, 0], "1": [0, 0.1, 0], "2": [-0.1, 0, 0]}},
-                              Path(__file__).parents[1] / "runs/calibration/cal4.yaml")
+                              Path(__file__).parents[1] / "runs/calibration/four_flights_white.yaml")
     cp = coefficient_prior(run.prior)
     assert cp.mean == pytest.approx(cal.truth.values) and cp.sd == pytest.approx(cal.truth.sd)
 
@@ -277,7 +277,7 @@ def test_a_campaign_recorded_before_the_template_had_nature_still_resumes(tmp_pa
     from dataclasses import replace
 
     from bayes_disc.calibration.campaign import CAMPAIGN_FILE, check_campaign
-    cal = load_cal_config(Path(__file__).parents[1] / "runs/calibration/cal4_ar1.yaml")
+    cal = load_cal_config(Path(__file__).parents[1] / "runs/calibration/four_flights_ar1.yaml")
     cal = replace(cal, output=tmp_path)
     old = {**cal.key(), "template": repr(cal.template).replace(", nature={}", "")}
     assert old != cal.key() and cal.earlier_keys() == [old]
@@ -297,7 +297,7 @@ def test_replicate_problem_is_what_the_replicates_fit_builds():
     from bayes_disc.inference.leastsq import flight_residuals
     from bayes_disc.inference.truth import truth_theta
     repo = Path(__file__).resolve().parents[1]
-    cal = load_cal_config(repo / "runs/calibration/cal4_ar1.yaml")
+    cal = load_cal_config(repo / "runs/calibration/four_flights_ar1.yaml")
     problem, cfg, result, truth = replicate_problem(cal, 3)
     assert truth == replicate_data(cal, 3)[1]
     assert cfg.least_squares.starts == 2

@@ -244,7 +244,7 @@ def test_sampler_agrees_with_importance_sampling(four_flights_run, four_flights)
 @pytest.mark.slow
 def test_ar1_posterior_is_as_wide_as_importance_sampling_says(tmp_path):
     """Four flights with AR(1) marker noise ρ = 0.85 (the first data set of the AR(1) calibration campaign,
-    runs/calibration/cal4_ar1.yaml), fitted with ``noise: {model: ar1}`` and the default sampler: every
+    runs/calibration/four_flights_ar1.yaml), fitted with ``noise: {model: ar1}`` and the default sampler: every
     coefficient's posterior sd within 10 % of an importance-sampling estimate (proposal: the Laplace
     approximation at the least-squares optimum, sd × 1.05, and the run's independence proposal, made
     defensive by a Gaussian on the MCMC moments; :func:`_importance_moments`).
@@ -262,7 +262,7 @@ def test_ar1_posterior_is_as_wide_as_importance_sampling_says(tmp_path):
     from bayes_disc.inference.config import config_from_mapping
     from bayes_disc.inference.data import build_problem
     from bayes_disc.inference.proposals import CompositeProposal, MixtureProposal
-    cal = load_cal_config(REPO / "runs/calibration/cal4_ar1.yaml")
+    cal = load_cal_config(REPO / "runs/calibration/four_flights_ar1.yaml")
     result, _, _, seed = replicate_data(cal, 0)
     write_synth(result, tmp_path / "markers.csv", tmp_path / "truth.json")
     run = replicate_run(cal, result, seed)

@@ -1,7 +1,7 @@
 """The calibration campaign description ``CAL.yaml`` (``bayes-disc calibrate``), validated up front.
 
 ```yaml
-name: cal4                 # campaign name
+name: four_flights_white  # campaign name
 replicates: 100            # N synthetic data sets
 seed: 16                   # replicate i draws everything from numpy's default_rng([seed, i])
 template: synth.yaml       # SYNTH.yaml (relative to this file) or an inline mapping of its keys:
