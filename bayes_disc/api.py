@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:                                  # imported lazily at run time: `import bayes_disc` stays light
-    from .inference.config import RunConfig
+    from .inference.model.config import RunConfig
 
 logger = logging.getLogger(__name__)
 
@@ -386,7 +386,7 @@ def _is_table(x) -> bool:
 
 
 def _config_from_dict(config: Mapping, output, base_dir) -> RunConfig:
-    from .inference.config import config_from_mapping, load_config
+    from .inference.model.config import config_from_mapping, load_config
     from .observation.config_io import ConfigError
     from .observation.markers import write_marker_csv
     from .observation.tables import marker_table_from_columns
@@ -468,7 +468,7 @@ def run_config(config, *, output=None, base_dir=None) -> RunConfig:
     TypeError
         For a ``config`` of another type.
     """
-    from .inference.config import RunConfig, load_config
+    from .inference.model.config import RunConfig, load_config
     if isinstance(config, RunConfig):
         return config if output is None else replace(config, output=Path(output))
     if isinstance(config, (str, os.PathLike)):
@@ -618,7 +618,7 @@ def compare(run_dirs):
         If fewer than two runs are given, a run has no pointwise log-likelihood, or the runs' observed
         marker points differ.
     """
-    from .inference.results import compare_runs
+    from .inference.results.results import compare_runs
 
     def folder(run):
         return run.output if isinstance(run, SampleResult) else run

@@ -51,7 +51,7 @@ def _cmd_synth(args) -> int:
 
 def _cmd_sample(args) -> int:
     from . import pipeline
-    from .inference.config import load_config
+    from .inference.model.config import load_config
     cfg = load_config(args.config, output_override=args.output)
     summary = pipeline.sample(cfg, resume=args.resume, progress=not args.no_progress,
                               reports_dir=pipeline.reports_dir(args.output)).result
@@ -60,7 +60,7 @@ def _cmd_sample(args) -> int:
 
 def _cmd_identifiability(args) -> int:
     from . import pipeline
-    from .inference.config import load_config
+    from .inference.model.config import load_config
     cfg = load_config(args.config, output_override=args.output)
     pipeline.identifiability(cfg, profiles=args.profiles, design=not args.no_design)
     return 0
@@ -68,7 +68,7 @@ def _cmd_identifiability(args) -> int:
 
 def _cmd_diagnose(args) -> int:
     from . import pipeline
-    from .inference.config import load_config
+    from .inference.model.config import load_config
     cfg = load_config(args.config, output_override=args.output)
     pipeline.diagnose(cfg, sample=not args.no_sample, processes=args.processes, progress=not args.no_progress,
                       reports_dir=pipeline.reports_dir(args.output), learn=not args.no_learn)
@@ -76,7 +76,7 @@ def _cmd_diagnose(args) -> int:
 
 
 def _cmd_predict(args) -> int:
-    from .inference.config import load_config
+    from .inference.model.config import load_config
     from .inference.predict import run_predict
     cfg = load_config(args.config, output_override=args.output)
     result = run_predict(cfg, args.run_dir, output=args.output)
@@ -104,7 +104,7 @@ def _cmd_calibrate(args) -> int:
 def _cmd_compare(args) -> int:
     import json
     from .api import compare
-    from .inference.results import run_label
+    from .inference.results.results import run_label
     try:
         table = compare(args.run_dirs)
     except (ValueError, FileNotFoundError) as e:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from .diagnostics.diagnosis import run_diagnose
 from .diagnostics.run import run_identifiability
-from .inference.config import RunConfig
+from .inference.model.config import RunConfig
 from .inference.run import run_sample, stage
 from .report import build_report
 

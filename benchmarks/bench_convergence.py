@@ -27,8 +27,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bayes_disc.inference.config import SamplerSettings  # noqa: E402
-from bayes_disc.inference.sampler import ADAPTATIONS, CHECK_BLOCK, _read, chain_paths, convergence  # noqa: E402
+from bayes_disc.inference.model.config import SamplerSettings  # noqa: E402
+from bayes_disc.inference.sampling.sampler import ADAPTATIONS, CHECK_BLOCK, _read, chain_paths, convergence  # noqa: E402
 
 
 def reference_tau(chain: np.ndarray, c: float = 5.0) -> np.ndarray:

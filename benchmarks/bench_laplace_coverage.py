@@ -32,7 +32,7 @@ sys.path.insert(0, str(ROOT))
 
 from bayes_disc.calibration.config import load_cal_config  # noqa: E402
 from bayes_disc.calibration.replicate import replicate_problem  # noqa: E402
-from bayes_disc.inference.leastsq import fit_least_squares, refine_least_squares  # noqa: E402
+from bayes_disc.inference.fitting.leastsq import fit_least_squares, refine_least_squares  # noqa: E402
 
 
 def laplace_z(cal, index: int, names, fix_rho: float | None = None) -> tuple[np.ndarray, float, list]:

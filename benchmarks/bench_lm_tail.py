@@ -3,7 +3,7 @@ one start, step by step.
 
 For a kept ``bench_scale.py`` case (``DIR/f<flights>``, its config.yaml), or any run configuration, the
 minimiser's steps from the first least-squares start are replayed with the same damping rule as
-:func:`bayes_disc.inference.leastsq.minimise` (Nielsen's update of μ after an accepted step; μ × ν, ν
+:func:`bayes_disc.inference.fitting.leastsq.minimise` (Nielsen's update of μ after an accepted step; μ × ν, ν
 doubling, after a rejected one) and, per step, printed:
 
 * the cost above the final optimum's (½ Σ whitened residual², prior included);
@@ -28,9 +28,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bayes_disc.inference import leastsq  # noqa: E402
-from bayes_disc.inference.config import load_config  # noqa: E402
-from bayes_disc.inference.data import build_problem  # noqa: E402
+from bayes_disc.inference.fitting import leastsq  # noqa: E402
+from bayes_disc.inference.model.config import load_config  # noqa: E402
+from bayes_disc.inference.model.data import build_problem  # noqa: E402
 
 
 def cost(problem, sigma, x) -> tuple[float, list, np.ndarray]:

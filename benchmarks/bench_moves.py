@@ -25,11 +25,11 @@ from emcee.state import State
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bayes_disc.inference.config import load_config  # noqa: E402
-from bayes_disc.inference.data import build_problem  # noqa: E402
-from bayes_disc.inference.moves import (FlightBlockMove, IndependenceJump, RidgeCarry, RidgeFlightRefresh,  # noqa: E402
-                                        SharedShift, block_factors)
-from bayes_disc.inference.proposals import CompositeProposal, Proposal, RidgeProposal  # noqa: E402
+from bayes_disc.inference.model.config import load_config  # noqa: E402
+from bayes_disc.inference.model.data import build_problem  # noqa: E402
+from bayes_disc.inference.sampling.moves import (FlightBlockMove, IndependenceJump, RidgeCarry, RidgeFlightRefresh,
+                                                 SharedShift, block_factors)
+from bayes_disc.inference.sampling.proposals import CompositeProposal, Proposal, RidgeProposal  # noqa: E402
 
 
 class _Model:

@@ -37,9 +37,9 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from bench_scale import write_case  # noqa: E402
 
-from bayes_disc.inference import leastsq, profile  # noqa: E402
-from bayes_disc.inference.config import load_config  # noqa: E402
-from bayes_disc.inference.data import build_problem  # noqa: E402
+from bayes_disc.inference.fitting import leastsq, profile  # noqa: E402
+from bayes_disc.inference.model.config import load_config  # noqa: E402
+from bayes_disc.inference.model.data import build_problem  # noqa: E402
 
 
 class _Counted:

@@ -23,8 +23,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bayes_disc.inference import diagnostics_mcmc as dm  # noqa: E402
-from bayes_disc.inference.sampler import StoredChains  # noqa: E402
+from bayes_disc.inference.sampling import mcmc_stats as dm  # noqa: E402
+from bayes_disc.inference.sampling.sampler import StoredChains  # noqa: E402
 
 
 def sorted_rhat(chain: np.ndarray) -> np.ndarray:

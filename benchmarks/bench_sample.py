@@ -21,10 +21,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bayes_disc.inference.config import load_config  # noqa: E402
-from bayes_disc.inference.data import build_problem  # noqa: E402
+from bayes_disc.inference.model.config import load_config  # noqa: E402
+from bayes_disc.inference.model.data import build_problem  # noqa: E402
 from bayes_disc.inference.run import run_sample  # noqa: E402
-from bayes_disc.inference.sampler import n_walkers  # noqa: E402
+from bayes_disc.inference.sampling.sampler import n_walkers  # noqa: E402
 
 
 def logprob_time(cfg, repeats: int = 15) -> tuple[float, int]:

@@ -1,15 +1,15 @@
 """Least squares on many flights (issue 18): starts fitted on the most informative flights, the others joined
 to the best start, and the step-length correction of fits started next to an optimum
-(bayes_disc.inference.leastsq: informative_flights, join_flights, step_length)."""
+(bayes_disc.inference.fitting.leastsq: informative_flights, join_flights, step_length)."""
 import numpy as np
 import pytest
 
-from bayes_disc.inference import leastsq
-from bayes_disc.inference.arrow import ArrowJacobian
-from bayes_disc.inference.initial import initial_state_from_data
-from bayes_disc.inference.leastsq import (MU_NEAR, REFINE_DECREMENT, fit_least_squares, informative_flights,
-                                          minimise, step_length, _rms)
-from bayes_disc.inference.model import Problem
+from bayes_disc.inference.fitting import leastsq
+from bayes_disc.inference.fitting.arrow import ArrowJacobian
+from bayes_disc.inference.model.initial import initial_state_from_data
+from bayes_disc.inference.fitting.leastsq import (MU_NEAR, REFINE_DECREMENT, fit_least_squares, informative_flights,
+                                                  minimise, step_length, _rms)
+from bayes_disc.inference.model.problem import Problem
 from bayes_disc.observation.synth import DEFAULT_MARKERS, LaunchSpec, SynthSpec, synthesize
 
 

@@ -5,8 +5,8 @@ import arviz as az
 import numpy as np
 import pytest
 
-from bayes_disc.inference.diagnostics_mcmc import (SUMMARY_COLUMNS, bulk_ess, ess_bulk, rank_rhat, rhat_across,
-                                                   summary_diagnostics)
+from bayes_disc.inference.sampling.mcmc_stats import (SUMMARY_COLUMNS, bulk_ess, ess_bulk, rank_rhat, rhat_across,
+                                                      summary_diagnostics)
 
 
 def arviz(x: np.ndarray, what: str) -> np.ndarray:
@@ -105,7 +105,7 @@ def sampler_like(n_ens: int, n_steps: int, n_w: int, dim: int, seed: int) -> np.
 def test_run_length_ranks_equal_sorting_every_draw(n_steps, n_w):
     """The ranks found from runs of repeated draws (diagnostics_mcmc._z_and_median) are those of sorting
     every draw, bit for bit, and so are R-hat across ensembles and bulk ESS (even and odd draw counts)."""
-    from bayes_disc.inference import diagnostics_mcmc as dm
+    from bayes_disc.inference.sampling import mcmc_stats as dm
     c = sampler_like(3, n_steps, n_w, 4, n_steps * n_w)
     per_walker = np.moveaxis(np.moveaxis(c, 2, 1).reshape(3 * n_w, n_steps, 4), 2, 0)
     z, median = dm._z_and_median(per_walker)

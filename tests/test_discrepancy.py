@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from bayes_disc.diagnostics.discrepancy import LearnedDiscrepancy, family_of, select_columns
-from bayes_disc.inference.config import load_config
-from bayes_disc.inference.data import build_problem
-from bayes_disc.inference.leastsq import refine_least_squares
+from bayes_disc.inference.model.config import load_config
+from bayes_disc.inference.model.data import build_problem
+from bayes_disc.inference.fitting.leastsq import refine_least_squares
 from bayes_disc.observation.registry import MODEL_EXTENSIONS, split_extensions, unit
 from bayes_disc.physics import Disc, TERMS
 from bayes_disc.physics.discrepancy import (BASE_COLUMNS, COLUMNS, DISCREPANCY, FUNCTIONS, basis, coefficient_curve,

@@ -8,9 +8,9 @@ from bayes_disc.diagnostics.diagnosis import rms_text
 from bayes_disc.diagnostics.missing_physics import (CANDIDATES, ModelFit, applicable_candidates, diagnose,
                                                      model_fit, onset_unavailable, structured, term_signature)
 from bayes_disc.diagnostics.residuals import flight_residuals, localise, peak_window
-from bayes_disc.inference.inertial import InertialThrow, level_start, own_start, search_starts
-from bayes_disc.inference.leastsq import LeastSquaresResult, fit_least_squares, noise_text
-from bayes_disc.inference.model import Problem
+from bayes_disc.inference.model.inertial import InertialThrow, level_start, own_start, search_starts
+from bayes_disc.inference.fitting.leastsq import LeastSquaresResult, fit_least_squares, noise_text
+from bayes_disc.inference.model.problem import Problem
 from bayes_disc.observation.inertial_synth import LoggerSpec, synthetic_log
 from bayes_disc.observation.models.inertial import SERIES, InertialMeasurements
 from bayes_disc.observation.registry import split_extensions

@@ -7,9 +7,9 @@ import pytest
 from scipy.integrate import quad
 from scipy.stats import multivariate_normal
 
-from bayes_disc.inference.initial import initial_state_from_data
-from bayes_disc.inference.leastsq import _rms, jacobian_blocks, refine_least_squares
-from bayes_disc.inference.model import Problem
+from bayes_disc.inference.model.initial import initial_state_from_data
+from bayes_disc.inference.fitting.leastsq import _rms, jacobian_blocks, refine_least_squares
+from bayes_disc.inference.model.problem import Problem
 from bayes_disc.observation.markers import FlightObservation, flights_from_table, read_marker_csv
 from bayes_disc.observation.models import MarkerPositions, gaussian_marginal_loglik
 from bayes_disc.observation.models.noise import AR1Noise, WhiteNoise, frame_index, marker_noise
@@ -280,8 +280,8 @@ def test_plain_gaussian_log_prob_is_unchanged_on_the_demo_data():
     observed points (:meth:`MarkerPositions.effective_sum_squares`), in another order than numpy's pairwise
     sum of the residual array."""
     from conftest import REPO
-    from bayes_disc.inference.config import load_config
-    from bayes_disc.inference.data import build_problem
+    from bayes_disc.inference.model.config import load_config
+    from bayes_disc.inference.model.data import build_problem
     cfg = load_config(REPO / "runs" / "demo" / "config.yaml")
     problem = build_problem(cfg)
     assert all(c.noise.white for ch in problem.channels for c in ch)
@@ -325,14 +325,14 @@ def folder(tmp_path_factory):
 
 
 def _config(folder, name, extra):
-    from bayes_disc.inference.config import load_config
+    from bayes_disc.inference.model.config import load_config
     path = folder / f"{name}.yaml"
     path.write_text(CONFIG.format(name=name, extra=extra))
     return load_config(path)
 
 
 def test_noise_configuration_keys_and_errors(folder):
-    from bayes_disc.inference.data import build_problem
+    from bayes_disc.inference.model.data import build_problem
     from bayes_disc.observation.config_io import ConfigError
     cfg = _config(folder, "c", "noise: {model: ar1}\nflight_options: {b: {noise: {per_point: false}}}")
     assert cfg.flight_noise("a")[0].model == "ar1" and cfg.flight_noise("b")[0].per_point == "false"
@@ -355,10 +355,10 @@ def test_noise_configuration_keys_and_errors(folder):
 def test_ar1_and_per_point_run_through_the_outputs(folder):
     """Fake chains around the truth through σ draws, posterior.nc (rho with a flight dimension, pointwise
     log-likelihood = the exact conditional log-likelihood, predictive draws) and summary.json."""
-    from bayes_disc.inference.data import build_problem
-    from bayes_disc.inference.results import build_inference_data, build_summary
+    from bayes_disc.inference.model.data import build_problem
+    from bayes_disc.inference.results.results import build_inference_data, build_summary
     from bayes_disc.inference.run import noise_info, noise_words
-    from bayes_disc.inference.sampler import Chains
+    from bayes_disc.inference.sampling.sampler import Chains
     cfg = _config(folder, "r", "flight_options: {a: {noise: {model: ar1, per_point: false}}}")
     problem = build_problem(cfg)
     info = noise_info(problem)
@@ -408,7 +408,7 @@ def test_robust_flags_an_outlier_and_recognises_a_swap(clean):
     """A 5 cm outlier and one frame with markers 0 and 2 exchanged, on a least-squares fit of a short flight:
     the outlier is listed as an outlier, the frame as a swap of 0 and 2 (not as two outliers), and the
     refit on the cleaned data recovers the clean fit."""
-    from bayes_disc.inference.robust import robust_refit
+    from bayes_disc.inference.fitting.robust import robust_refit
     rng = np.random.default_rng(21)
     pos = clean.positions + 1.5e-3 * rng.normal(size=clean.positions.shape)
     plain = replace(clean, positions=pos.copy())
@@ -435,7 +435,7 @@ def test_gaussian_runs_are_warned_of_gross_errors_and_clean_data_are_not(clean, 
     (`noise: {model: robust}`) before sampling; on clean data (and with robust noise) nothing is said."""
     import logging
 
-    from bayes_disc.inference.robust import gross_error_advice, suspected_gross_errors
+    from bayes_disc.inference.fitting.robust import gross_error_advice, suspected_gross_errors
     from bayes_disc.inference.run import _robust
     rng = np.random.default_rng(22)
     pos = clean.positions + 1.5e-3 * rng.normal(size=clean.positions.shape)
@@ -532,7 +532,7 @@ def test_sample_with_robust_and_ar1_noise_writes_the_flags(tmp_path, monkeypatch
     post = az.from_netcdf(str(tmp_path / "out" / "posterior.nc")).posterior
     assert np.isfinite(post["rho"].sel(flight="b")).all() and np.isnan(post["rho"].sel(flight="a")).all()
     # the posterior averaged over the judgement: the sampled draws (at most JUDGEMENT_DRAWS) reweighted
-    from bayes_disc.inference.robust import JUDGEMENT_DRAWS
+    from bayes_disc.inference.fitting.robust import JUDGEMENT_DRAWS
     avg = json.loads((tmp_path / "out" / "judgement_average.json").read_text())
     assert avg["draws"] == min(JUDGEMENT_DRAWS, post.sizes["chain"] * post.sizes["draw"]) and avg["failed"] == 0
     assert np.isfinite(avg["pareto_k"]) and 1 <= avg["ess"] <= avg["draws"]

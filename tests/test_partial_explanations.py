@@ -15,7 +15,7 @@ from bayes_disc.cli import main
 from bayes_disc.diagnostics.diagnosis import run_diagnose
 from bayes_disc.diagnostics.missing_physics import SHARE_PARTIAL, excess_share
 from bayes_disc.diagnostics.residuals import FlightResiduals, noise_floor, second_difference_variance
-from bayes_disc.inference.config import load_config
+from bayes_disc.inference.model.config import load_config
 from bayes_disc.observation.models.base import ResidualSeries
 from bayes_disc.observation.synth import DEFAULT_MARKERS
 

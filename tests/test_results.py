@@ -12,14 +12,14 @@ import h5py
 import numpy as np
 import pytest
 
-from bayes_disc.inference.config import load_config
-from bayes_disc.inference.data import build_problem
-from bayes_disc.inference.diagnostics_mcmc import rhat_across
-from bayes_disc.inference.results import (build_inference_data, build_summary, compare_runs, ensemble_view,
-                                          load_posterior, pointwise_log_likelihood, posterior_draws, summarize,
-                                          summary_names, write_posterior, writing_posterior)
-from bayes_disc.inference.sampler import Chains
-from bayes_disc.inference.truth import truth_theta
+from bayes_disc.inference.model.config import load_config
+from bayes_disc.inference.model.data import build_problem
+from bayes_disc.inference.sampling.mcmc_stats import rhat_across
+from bayes_disc.inference.results.results import (build_inference_data, build_summary, compare_runs, ensemble_view,
+                                                  load_posterior, pointwise_log_likelihood, posterior_draws,
+                                                  summarize, summary_names, write_posterior, writing_posterior)
+from bayes_disc.inference.sampling.sampler import Chains
+from bayes_disc.inference.model.truth import truth_theta
 from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
 
 CONFIG = """name: {name}

@@ -176,7 +176,7 @@ def _importance_moments(problem, q, rng_seed: int = 1, batches: int = 9, per_bat
 
 def _with_defensive_gaussian(q, samples: np.ndarray, inflation: float = 1.2):
     """``q`` made defensive by an equal share of a Gaussian on the samples' moments (sd × ``inflation``)."""
-    from bayes_disc.inference.proposals import CompositeProposal, MixtureProposal
+    from bayes_disc.inference.sampling.proposals import CompositeProposal, MixtureProposal
     gauss = MixtureProposal.from_components([samples.mean(axis=0)], [np.cov(samples.T) * inflation ** 2], [0.0])
     return CompositeProposal(q.parts + (gauss,), np.log(np.r_[0.5 * np.exp(q.log_weights), 0.5]))
 
@@ -208,7 +208,7 @@ def _with_defensive_t(q, samples: np.ndarray, nu: float = 4.0):
     than a Gaussian's, where the posterior's valley runs past every ridge component. On the four-flight run
     of stop 39 a Gaussian share (sd × 1.2, 1.5 or 2) left Pareto k̂ at 0.81 (stop 38's run: 0.809, 0.001
     inside the rule), the t share 0.72."""
-    from bayes_disc.inference.proposals import CompositeProposal
+    from bayes_disc.inference.sampling.proposals import CompositeProposal
     t = _StudentT(samples.mean(axis=0), np.cov(samples.T), nu)
     return CompositeProposal(q.parts + (t,), np.log(np.r_[0.5 * np.exp(q.log_weights), 0.5]))
 
@@ -227,9 +227,9 @@ def test_sampler_agrees_with_importance_sampling(four_flights_run, four_flights)
     the run's ridge-aware independence proposal, made defensive by an equal share of a Student t (ν = 4) on
     the MCMC samples' moments (:func:`_with_defensive_t`). Two different estimators: a sampler that misses part of the valley
     the ridge proposals cover fails it (the weights: :func:`_importance_moments`)."""
-    from bayes_disc.inference.config import load_config
-    from bayes_disc.inference.data import build_problem
-    from bayes_disc.inference.proposals import CompositeProposal
+    from bayes_disc.inference.model.config import load_config
+    from bayes_disc.inference.model.data import build_problem
+    from bayes_disc.inference.sampling.proposals import CompositeProposal
     d = four_flights_run
     summary, _ = four_flights
     problem = build_problem(load_config(d / "config.yaml"))
@@ -259,9 +259,9 @@ def test_ar1_posterior_is_as_wide_as_importance_sampling_says(tmp_path):
     from bayes_disc.api import sample
     from bayes_disc.calibration.config import load_cal_config
     from bayes_disc.calibration.replicate import replicate_data, replicate_run
-    from bayes_disc.inference.config import config_from_mapping
-    from bayes_disc.inference.data import build_problem
-    from bayes_disc.inference.proposals import CompositeProposal, MixtureProposal
+    from bayes_disc.inference.model.config import config_from_mapping
+    from bayes_disc.inference.model.data import build_problem
+    from bayes_disc.inference.sampling.proposals import CompositeProposal, MixtureProposal
     cal = load_cal_config(REPO / "runs/calibration/cal4_ar1.yaml")
     result, _, _, seed = replicate_data(cal, 0)
     write_synth(result, tmp_path / "markers.csv", tmp_path / "truth.json")

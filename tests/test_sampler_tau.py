@@ -3,8 +3,8 @@ import emcee
 import numpy as np
 import pytest
 
-from bayes_disc.inference import sampler
-from bayes_disc.inference.sampler import _tau
+from bayes_disc.inference.sampling import sampler
+from bayes_disc.inference.sampling.sampler import _tau
 
 
 def tau_walker_by_walker(chain: np.ndarray, c: float = 5.0) -> np.ndarray:

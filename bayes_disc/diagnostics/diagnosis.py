@@ -42,10 +42,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..inference.config import RunConfig
-from ..inference.data import build_problem, load_run_flights
-from ..inference.inertial import load_run_throws
-from ..inference.leastsq import fit_least_squares, refine_least_squares
+from ..inference.model.config import RunConfig
+from ..inference.model.data import build_problem, load_run_flights
+from ..inference.model.inertial import load_run_throws
+from ..inference.fitting.leastsq import fit_least_squares, refine_least_squares
 from ..inference.run import RESULT, run_sample
 from ..observation.registry import PHYSICS_TERM, unit
 from ..physics import COEFFICIENT_NAMES

@@ -26,10 +26,10 @@ from scipy.optimize import least_squares
 
 from ..observation.config_io import ConfigError
 from ..observation.models import MarkerPositions
-from .config import RunConfig
-from .data import build_problem
-from .inertial import load_run_throws
-from .leastsq import FAILED_RESIDUAL, fit_least_squares
+from .model.config import RunConfig
+from .model.data import build_problem
+from .model.inertial import load_run_throws
+from .fitting.leastsq import FAILED_RESIDUAL, fit_least_squares
 
 log = logging.getLogger(__name__)
 

@@ -29,18 +29,18 @@ from typing import Iterator
 import numpy as np
 
 from ..observation.config_io import ConfigError
-from .config import RunConfig
+from .model.config import RunConfig
 from ..observation.models import MarkerPositions
-from .data import build_problem
-from .inertial import load_run_throws
-from .leastsq import START_FLIGHTS, fit_least_squares, noise_text
-from .results import build_inference_data, build_summary, format_table, prior_record, writing_posterior
-from .profile import MAX_LOWER_REFITS, lowest_point, profiles_through_lowest
-from .robust import (FLAGGED, JUDGEMENT_AVERAGE, average_over_judgement, gross_error_advice, robust_flights,
-                     robust_refit, suspected_gross_errors, with_saved_flags)
-from .proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
-from .sampler import n_walkers, run_sampler, saved_steps
-from .versions import software_versions
+from .model.data import build_problem
+from .model.inertial import load_run_throws
+from .fitting.leastsq import START_FLIGHTS, fit_least_squares, noise_text
+from .results.results import build_inference_data, build_summary, format_table, prior_record, writing_posterior
+from .fitting.profile import MAX_LOWER_REFITS, lowest_point, profiles_through_lowest
+from .fitting.robust import (FLAGGED, JUDGEMENT_AVERAGE, average_over_judgement, gross_error_advice, robust_flights,
+                             robust_refit, suspected_gross_errors, with_saved_flags)
+from .sampling.proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
+from .sampling.sampler import n_walkers, run_sampler, saved_steps
+from .results.versions import software_versions
 
 logger = logging.getLogger(__name__)
 #: ``extra`` of log records that are results (tables), not progress

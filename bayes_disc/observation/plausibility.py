@@ -36,7 +36,7 @@ flight, reason and the likely fix; exit status 2 from the command line). The che
    acceleration ≈ −g" is not used: lift exceeds the weight in a fast throw (a_z ≈ +0.9 g at release for 14 m/s and α = 7°), so a level glide has
    a_z ≈ 0 just like the lateral axis of a y-up export. Limitation: gravity along the *downrange* axis
    is lateral to nothing and, with strong drag, may pass; the least-squares RMS check
-   (:func:`bayes_disc.inference.fit_checks.check_fit_plausible`) stops such data before sampling.
+   (:func:`bayes_disc.inference.fitting.fit_checks.check_fit_plausible`) stops such data before sampling.
    Flights with fewer than :data:`MIN_WINDOWS` windows are not checked for gravity.
 
 Inertial data are not checked here yet.

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..physics import COEFFICIENT_NAMES, COEFFICIENT_UNITS, Term, TermParameter
+from ...physics import COEFFICIENT_NAMES, COEFFICIENT_UNITS, Term, TermParameter
 
 IC_NAMES = ("x", "y", "z", "vx", "vy", "vz", "th1", "th2", "th3", "wx", "wy", "wz")
 IC_UNITS = ("m", "m", "m", "m/s", "m/s", "m/s", "rad", "rad", "rad", "rad/s", "rad/s", "rad/s")

@@ -38,10 +38,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..physics.parallel import mp_context
+from ...physics.parallel import mp_context
 from .arrow import ArrowJacobian
 from .leastsq import MU_NEAR, LeastSquaresResult, jacobian_blocks, minimise, refit_from_lower, whitened_costs
-from .model import Problem
+from ..model.problem import Problem
 
 #: the path stops past this profile deviance (≈ 3.5 σ for a Gaussian)
 MAX_DEVIANCE = 12.0

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..observation.markers import FlightObservation
-from ..physics import COEFFICIENT_NAMES
-from .model import Problem
+from ...observation.markers import FlightObservation
+from ...physics import COEFFICIENT_NAMES
+from .problem import Problem
 
 #: the inertial logger's shared mount parameters: θ name -> (truth key, index or None)
 _LOGGER_SHARED = {"imu_offset_x": ("offset_m", 0), "imu_offset_y": ("offset_m", 1), "imu_offset_z": ("offset_m", 2),

@@ -40,11 +40,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from ..observation.config_io import ConfigError, Section, load_yaml
-from ..observation.config_blocks import read_disc_env, read_markers, read_physics
-from ..observation.models.noise import NOISE_MODELS, PER_POINT
-from ..physics import COEFFICIENT_NAMES, LITERATURE, Disc, Environment, literature_coefficients
-from ..physics.kernel import DEFAULT_METHOD, TABLEAUX
+from ...observation.config_io import ConfigError, Section, load_yaml
+from ...observation.config_blocks import read_disc_env, read_markers, read_physics
+from ...observation.models.noise import NOISE_MODELS, PER_POINT
+from ...physics import COEFFICIENT_NAMES, LITERATURE, Disc, Environment, literature_coefficients
+from ...physics.kernel import DEFAULT_METHOD, TABLEAUX
 from .priors import CoefficientPrior, prior_around
 
 PRIORS = ("potts_crowther", "weak")

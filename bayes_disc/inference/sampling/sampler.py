@@ -58,13 +58,12 @@ import emcee
 import numpy as np
 import scipy.fft
 
-from ..physics.parallel import mp_context
+from ...physics.parallel import mp_context
 from .backend import RoundBackend
-from .config import SamplerSettings
-from .diagnostics_mcmc import ess_bulk, rhat_across
-from .model import Problem
-from .moves import (FlightBlockMove, IndependenceJump, RidgeCarry, RidgeFlightRefresh, SharedShift,
-                    block_factors)
+from ..model.config import SamplerSettings
+from .mcmc_stats import ess_bulk, rhat_across
+from ..model.problem import Problem
+from .moves import FlightBlockMove, IndependenceJump, RidgeCarry, RidgeFlightRefresh, SharedShift, block_factors
 from .proposals import CompositeProposal, Proposal, RidgeProposal
 
 logger = logging.getLogger(__name__)

@@ -46,7 +46,7 @@ from emcee.moves.mh import MHMove
 from emcee.moves.move import Move
 from emcee.state import State
 
-from .model import Problem
+from ..model.problem import Problem
 from .proposals import scaled_cholesky
 
 

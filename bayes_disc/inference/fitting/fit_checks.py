@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..observation.plausibility import ImplausibleDataError
+from ...observation.plausibility import ImplausibleDataError
 
 MAX_PLAUSIBLE_RMS_M = 0.020
 

@@ -27,7 +27,7 @@ import numpy as np
 from scipy.linalg import lapack, solve_triangular
 
 from ._ridge_kernels import interpolated_product, interpolated_whiten
-from .model import Problem
+from ..model.problem import Problem
 
 #: proposal sd / posterior sd after a warm-up re-fit (slightly wider: safe tails)
 PROPOSAL_INFLATION = 1.03

@@ -37,15 +37,15 @@ import h5py
 import numpy as np
 import xarray as xr
 
-from ..physics import COEFFICIENT_NAMES, LITERATURE
-from ..physics.parallel import mp_context
-from ..observation.models import MarkerPositions
-from ..observation.models.inertial import InertialMeasurements
-from .diagnostics_mcmc import rank_rhat, summary_diagnostics
-from .layout import IC_NAMES
-from .model import Problem
-from .priors import coefficient_prior
-from .sampler import Chains
+from ...physics import COEFFICIENT_NAMES, LITERATURE
+from ...physics.parallel import mp_context
+from ...observation.models import MarkerPositions
+from ...observation.models.inertial import InertialMeasurements
+from ..sampling.mcmc_stats import rank_rhat, summary_diagnostics
+from ..model.layout import IC_NAMES
+from ..model.problem import Problem
+from ..model.priors import coefficient_prior
+from ..sampling.sampler import Chains
 
 #: the inertial channels, in the order of the models' predictions
 IMU_CHANNELS = ("gx", "gy", "gz", "ax", "ay", "az")

@@ -11,10 +11,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..physics import literature_coefficients
+from ...physics import literature_coefficients
 from .arrow import ArrowJacobian
 from .fit_checks import check_fit_plausible
-from .model import Problem
+from ..model.problem import Problem
 
 FAILED_RESIDUAL = 1e3  # whitened residual standing in for a failed simulation
 

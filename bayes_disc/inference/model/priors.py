@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 
-from ..physics import COEFFICIENT_NAMES, POTTS_CROWTHER
+from ...physics import COEFFICIENT_NAMES, POTTS_CROWTHER
 
 RATE_PRIORS = {"CMq": (0.0, 0.05), "CRr": (0.0, 0.01), "CRp": (0.0, 0.05), "CNr": (0.0, 1e-3)}
 PC_WIDTHS = {"CL0": 0.2, "CLa": 1.5, "CD0": 0.1, "CDa": 1.5, "CM0": 0.1, "CMa": 0.3}
