@@ -32,14 +32,14 @@ def sorted_rhat(chain: np.ndarray) -> np.ndarray:
     n_ens, n_steps, n_w, dim = chain.shape
     s = dm._split(np.moveaxis(chain.reshape(n_ens, n_steps * n_w, dim), 2, 0))
     folded = np.abs(s - np.median(s.reshape(dim, -1), axis=1)[:, None, None])
-    return np.maximum(dm._rhat(dm._z_scale_sorted(s)), dm._rhat(dm._z_scale_sorted(folded)))
+    return np.maximum(dm._psrf(dm._z_scale_sorted(s)), dm._psrf(dm._z_scale_sorted(folded)))
 
 
 def sorted_ess(chain: np.ndarray) -> np.ndarray:
     """Bulk ESS, every walker a chain, with every draw sorted."""
     n_ens, n_steps, n_w, dim = chain.shape
     y = np.moveaxis(np.moveaxis(chain, 2, 1).reshape(n_ens * n_w, n_steps, dim), 2, 0)
-    return dm._ess(dm._z_scale_sorted(dm._split(y)))
+    return dm._effective_draws(dm._z_scale_sorted(dm._split(y)))
 
 
 def main(argv=None) -> int:
@@ -56,7 +56,8 @@ def main(argv=None) -> int:
     x = stored.block(0, slice(0, min(a.params, stored.shape[-1])))
     fresh = np.ones(x.shape, bool)
     fresh[:, 1:] = x[:, 1:] != x[:, :-1]
-    pairs = {"R-hat across ensembles": (sorted_rhat, dm.rhat_across), "bulk ESS": (sorted_ess, dm.ess_bulk)}
+    pairs = {"R-hat across ensembles": (sorted_rhat, lambda c: dm.rhat(c, layout="ensembles")),
+             "bulk ESS": (sorted_ess, lambda c: dm.ess(c, layout="walkers"))}
     print(f"{a.out_dir}: {x.shape[0]} ensembles × {x.shape[1]} steps × {x.shape[2]} walkers, {x.shape[3]} parameters; "
           f"draws starting a run (the walker moved): {fresh.mean():.3f}")
     for name, (ref, new) in pairs.items():

@@ -14,7 +14,7 @@ import pytest
 
 from bayes_disc.inference.model.config import load_config
 from bayes_disc.inference.model.data import build_problem
-from bayes_disc.inference.sampling.mcmc_stats import rhat_across
+from bayes_disc.inference.sampling.mcmc_stats import rhat
 from bayes_disc.inference.results.results import (build_inference_data, build_summary, compare_runs, ensemble_view,
                                                   load_posterior, pointwise_log_likelihood, posterior_draws,
                                                   summarize, summary_names, write_posterior, writing_posterior)
@@ -156,7 +156,7 @@ def test_summary_statistics_are_arviz_summary_and_r_hat_across_ensembles(base):
         assert p[name]["mcse_mean"] == pytest.approx(float(centred.loc["v", "mcse_mean"]), rel=1e-12), name
         assert p[name]["r_hat_walkers"] == pytest.approx(row["r_hat"], rel=1e-12)
     # r_hat: the sampler's statistic across ensembles, reproducible from posterior.nc alone
-    theta_rh = rhat_across(chains.chain)
+    theta_rh = rhat(chains.chain, layout="ensembles")
     across = az.rhat(ensemble_view(idata.posterior))
     for i, name in enumerate(problem.names):
         assert p[name]["r_hat"] == pytest.approx(theta_rh[i], rel=1e-12)

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from bayes_disc.inference.sampling import sampler
+from bayes_disc.inference.sampling.mcmc_stats import rhat
 from bayes_disc.inference.sampling.sampler import _tau
 
 
@@ -104,6 +105,6 @@ def test_check_on_stored_chains_reads_blocks_and_gives_the_in_memory_verdict(tmp
         assert stored[key] == pytest.approx(whole[key], rel=1e-12), key
     np.testing.assert_allclose(stored["tau"], whole["tau"], rtol=1e-12)
     # the coefficients' R-hat alone: the largest of theirs after the burn-in, below every parameter's largest here
-    rh = sampler.rhat_across(chains[:, whole["burn"]:])
+    rh = rhat(chains[:, whole["burn"]:], layout="ensembles")
     assert whole["rhat_max"] == pytest.approx(rh.max(), rel=1e-12)
     assert whole["rhat_max_coef"] == pytest.approx(rh[coef].max(), rel=1e-12) and rh[coef].max() < rh.max()

@@ -41,7 +41,7 @@ from ...physics import COEFFICIENT_NAMES, LITERATURE
 from ...physics.parallel import mp_context
 from ...observation.models import MarkerPositions
 from ...observation.models.inertial import InertialMeasurements
-from ..sampling.mcmc_stats import rank_rhat, summary_diagnostics
+from ..sampling.mcmc_stats import rhat, summary_diagnostics
 from ..model.layout import IC_NAMES
 from ..model.problem import Problem
 from ..model.priors import coefficient_prior
@@ -231,7 +231,7 @@ def _summary_block(post: xr.Dataset, by_ensemble: xr.Dataset, block: list[str]) 
     """:func:`summarize`'s records of the parameters ``block``."""
     x = np.stack([np.asarray(posterior_draws(post, n), float) for n in block])        # (p, walker, draw)
     diag = summary_diagnostics(x)
-    rh = rank_rhat(np.stack([np.asarray(posterior_draws(by_ensemble, n), float) for n in block]))
+    rh = rhat(np.stack([np.asarray(posterior_draws(by_ensemble, n), float) for n in block]))
     params = {}
     for i, name in enumerate(block):
         values = x[i].reshape(-1)

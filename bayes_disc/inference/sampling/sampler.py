@@ -61,7 +61,7 @@ import scipy.fft
 from ...physics.parallel import mp_context
 from .backend import RoundBackend
 from ..model.config import SamplerSettings
-from .mcmc_stats import ess_bulk, rhat_across
+from . import mcmc_stats
 from ..model.problem import Problem
 from .moves import FlightBlockMove, IndependenceJump, RidgeCarry, RidgeFlightRefresh, SharedShift, block_factors
 from .proposals import CompositeProposal, Proposal, RidgeProposal
@@ -464,7 +464,8 @@ def convergence(chain, settings: SamplerSettings, coef_idx: np.ndarray, first_st
         def after_burn(b):
             x = source.block(skip, b)
             wanted = np.flatnonzero(coef[b])                        # the rule asks ESS of the coefficients alone
-            return tau_of(x), rhat_across(x), (ess_bulk(x[..., wanted]) if wanted.size else np.zeros(0))
+            return (tau_of(x), mcmc_stats.rhat(x, layout="ensembles"),
+                    mcmc_stats.ess(x[..., wanted], layout="walkers") if wanted.size else np.zeros(0))
 
         parts = list(threads.map(after_burn, blocks))
     tau = np.concatenate([p[0] for p in parts], axis=1)
