@@ -28,7 +28,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bayes_disc.inference.model.config import SamplerSettings  # noqa: E402
-from bayes_disc.inference.sampling.sampler import ADAPTATIONS, CHECK_BLOCK, _read, chain_paths, convergence  # noqa: E402
+from bayes_disc.inference.sampling.stopping import ADAPTATIONS, CHECK_BLOCK, convergence
+from bayes_disc.inference.sampling.chains import _read, chain_paths  # noqa: E402
 
 
 def reference_tau(chain: np.ndarray, c: float = 5.0) -> np.ndarray:

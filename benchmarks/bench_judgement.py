@@ -30,7 +30,7 @@ from bayes_disc.inference.model.config import load_config  # noqa: E402
 from bayes_disc.inference.model.data import build_problem  # noqa: E402
 from bayes_disc.inference.fitting.robust import average_over_judgement, with_saved_flags  # noqa: E402
 from bayes_disc.inference.run import run_sample  # noqa: E402
-from bayes_disc.inference.sampling.sampler import _read, chain_paths  # noqa: E402
+from bayes_disc.inference.sampling.chains import _read, chain_paths  # noqa: E402
 from bayes_disc.observation.markers import read_marker_csv, write_marker_csv  # noqa: E402
 from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth  # noqa: E402
 

@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bayes_disc.inference.sampling import mcmc_stats as dm  # noqa: E402
-from bayes_disc.inference.sampling.sampler import StoredChains  # noqa: E402
+from bayes_disc.inference.sampling.chains import StoredChains  # noqa: E402
 
 
 def sorted_rhat(chain: np.ndarray) -> np.ndarray:

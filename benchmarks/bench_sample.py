@@ -24,7 +24,7 @@ sys.path.insert(0, str(ROOT))
 from bayes_disc.inference.model.config import load_config  # noqa: E402
 from bayes_disc.inference.model.data import build_problem  # noqa: E402
 from bayes_disc.inference.run import run_sample  # noqa: E402
-from bayes_disc.inference.sampling.sampler import n_walkers  # noqa: E402
+from bayes_disc.inference.sampling.mixing import n_walkers  # noqa: E402
 
 
 def logprob_time(cfg, repeats: int = 15) -> tuple[float, int]:

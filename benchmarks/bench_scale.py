@@ -45,7 +45,8 @@ from bayes_disc.inference.model.config import load_config  # noqa: E402
 from bayes_disc.inference.model.data import build_problem  # noqa: E402
 from bayes_disc.inference.fitting.leastsq import fit_least_squares, whitened_jacobian, whitened_residuals  # noqa: E402
 from bayes_disc.inference.run import posterior_approximation  # noqa: E402
-from bayes_disc.inference.sampling.sampler import n_walkers, run_sampler  # noqa: E402
+from bayes_disc.inference.sampling.mixing import n_walkers
+from bayes_disc.inference.sampling.sampler import run_sampler  # noqa: E402
 from bayes_disc.observation.synth import load_synth_spec, synthesize, write_synth  # noqa: E402
 
 DEMO = ROOT / "runs" / "demo"

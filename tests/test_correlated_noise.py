@@ -52,7 +52,7 @@ def _laplace_run(problem, ls, folder, seed: int):
     import numpy as np
 
     from bayes_disc.inference.results.results import build_inference_data
-    from bayes_disc.inference.sampling.sampler import Chains
+    from bayes_disc.inference.sampling.chains import Chains
     rng = np.random.default_rng(seed)
     n_ens, n_steps, n_w = 2, 40, 8
     flat = rng.multivariate_normal(ls.theta, ls.cov / 100, size=n_ens * n_steps * n_w)

@@ -358,7 +358,7 @@ def test_ar1_and_per_point_run_through_the_outputs(folder):
     from bayes_disc.inference.model.data import build_problem
     from bayes_disc.inference.results.results import build_inference_data, build_summary
     from bayes_disc.inference.run import noise_info, noise_words
-    from bayes_disc.inference.sampling.sampler import Chains
+    from bayes_disc.inference.sampling.chains import Chains
     cfg = _config(folder, "r", "flight_options: {a: {noise: {model: ar1, per_point: false}}}")
     problem = build_problem(cfg)
     info = noise_info(problem)

@@ -19,7 +19,8 @@ from bayes_disc.cli import main
 from bayes_disc.inference import run as run_module
 from bayes_disc.inference.model.config import SamplerSettings, load_config
 from bayes_disc.inference.run import run_sample
-from bayes_disc.inference.sampling.sampler import Progress, _Bar, convergence_fraction
+from bayes_disc.inference.sampling.progress import Progress, _Bar
+from bayes_disc.inference.sampling.stopping import convergence_fraction
 from bayes_disc.observation.config_io import ConfigError
 from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
 

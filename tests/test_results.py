@@ -18,7 +18,7 @@ from bayes_disc.inference.sampling.mcmc_stats import rhat
 from bayes_disc.inference.results.results import (build_inference_data, build_summary, compare_runs, ensemble_view,
                                                   load_posterior, pointwise_log_likelihood, posterior_draws,
                                                   summarize, summary_names, write_posterior, writing_posterior)
-from bayes_disc.inference.sampling.sampler import Chains
+from bayes_disc.inference.sampling.chains import Chains
 from bayes_disc.inference.model.truth import truth_theta
 from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
 

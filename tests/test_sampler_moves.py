@@ -273,7 +273,7 @@ def test_default_walkers_with_block_moves():
     """With block moves: 2·dim + 2 walkers on small problems, capped at WALKERS_CAP but never below the block
     minimum 2·(s + p) + 2; without: 2·dim + 2; an explicit count is made even and kept above the minimum."""
     from bayes_disc.inference.model.config import SamplerSettings
-    from bayes_disc.inference.sampling.sampler import WALKERS_CAP, n_walkers
+    from bayes_disc.inference.sampling.mixing import WALKERS_CAP, n_walkers
     block, plain = SamplerSettings(block_fraction=0.3), SamplerSettings(block_fraction=0.0)
     small = _ArrowTarget(s=10, p=12, n_flights=4)                 # the demo's sizes: dim 58
     assert n_walkers(block, small) == n_walkers(plain, small) == 2 * 58 + 2
@@ -286,7 +286,7 @@ def test_default_walkers_with_block_moves():
 
 
 def test_block_moves_only_when_the_walkers_cannot_span_the_space():
-    from bayes_disc.inference.sampling.sampler import uses_block_moves
+    from bayes_disc.inference.sampling.mixing import uses_block_moves
     assert not uses_block_moves(0.3, 118, 58) and uses_block_moves(0.3, 116, 58)
     assert not uses_block_moves(0.0, 46, 58)
 

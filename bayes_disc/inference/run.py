@@ -39,7 +39,9 @@ from .fitting.profile import MAX_LOWER_REFITS, lowest_point, profiles_through_lo
 from .fitting.robust import (FLAGGED, JUDGEMENT_AVERAGE, average_over_judgement, gross_error_advice, robust_flights,
                              robust_refit, suspected_gross_errors, with_saved_flags)
 from .sampling.proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
-from .sampling.sampler import n_walkers, run_sampler, saved_steps
+from .sampling.mixing import n_walkers
+from .sampling.sampler import run_sampler
+from .sampling.chains import saved_steps
 from .results.versions import software_versions
 
 logger = logging.getLogger(__name__)

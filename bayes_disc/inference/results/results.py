@@ -23,7 +23,7 @@ chains (walkers of an ensemble pooled step by step: the sampler's stopping rule)
 ``az.rhat(ensemble_view(idata))``. ``az.summary(idata)`` treats every *walker* as a chain and reports that
 walker-level R-hat, which summary.json records as ``r_hat_walkers``; ``ess_bulk``, ``ess_tail``,
 ``mcse_mean`` and ``mcse_sd`` in summary.json are ``az.summary(idata)``'s, computed for every parameter at once
-by :func:`.diagnostics_mcmc.summary_diagnostics` (ArviZ loops over the parameters through xarray).
+by :func:`.mcmc_stats.summary_diagnostics` (ArviZ loops over the parameters through xarray).
 """
 from __future__ import annotations
 
@@ -45,7 +45,7 @@ from ..sampling.mcmc_stats import rhat, summary_diagnostics
 from ..model.layout import IC_NAMES
 from ..model.problem import Problem
 from ..model.priors import coefficient_prior
-from ..sampling.sampler import Chains
+from ..sampling.chains import Chains
 
 #: the inertial channels, in the order of the models' predictions
 IMU_CHANNELS = ("gx", "gy", "gz", "ax", "ay", "az")
@@ -263,7 +263,7 @@ def summarize(idata, names, threads: int = 1) -> dict:
         "ess_tail", "mcse_mean", "mcse_sd"}}`` in the parameter's unit (σ in m; ESS in samples). ``r_hat`` is
         across ensembles (``az.rhat(ensemble_view(idata.posterior))``); ``r_hat_walkers``, the ESS and the MCSE
         are ``az.summary(idata, kind="diagnostics")``'s (walkers as chains), computed for every parameter at
-        once by :mod:`.diagnostics_mcmc` (equal to ArviZ's; tests/test_diagnostics_mcmc.py, tests/test_results.py).
+        once by :mod:`.mcmc_stats` (equal to ArviZ's; tests/test_diagnostics_mcmc.py, tests/test_results.py).
     """
     post = idata.posterior
     by_ensemble = ensemble_view(post)
