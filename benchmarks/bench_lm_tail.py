@@ -3,7 +3,7 @@ one start, step by step.
 
 For a kept ``bench_scale.py`` case (``DIR/f<flights>``, its config.yaml), or any run configuration, the
 minimiser's steps from the first least-squares start are replayed with the same damping rule as
-:func:`bayes_disc.inference.fitting.leastsq.minimise` (Nielsen's update of μ after an accepted step; μ × ν, ν
+:func:`bayes_disc.inference.fitting.minimiser.minimise` (Nielsen's update of μ after an accepted step; μ × ν, ν
 doubling, after a rejected one) and, per step, printed:
 
 * the cost above the final optimum's (½ Σ whitened residual², prior included);
@@ -28,14 +28,14 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bayes_disc.inference.fitting import leastsq  # noqa: E402
+from bayes_disc.inference.fitting import leastsq, minimiser, residuals  # noqa: E402
 from bayes_disc.inference.model.config import load_config  # noqa: E402
 from bayes_disc.inference.model.data import build_problem  # noqa: E402
 
 
 def cost(problem, sigma, x) -> tuple[float, list, np.ndarray]:
     """(½ Σ r², per-flight whitened residuals, the prior's standardised deviations) at x (dim,)."""
-    parts = leastsq.flight_residuals(x, problem, sigma)
+    parts = residuals.flight_residuals(x, problem, sigma)
     prior = (x - problem.prior_mean) / problem.prior_sd
     return 0.5 * float(sum(p @ p for p in parts) + prior @ prior), parts, prior
 
@@ -57,14 +57,14 @@ def main(argv=None) -> int:
     problem = build_problem(load_config(args.case / "config.yaml"))
     sigma = problem.nominal_noise
     x = leastsq._starts(problem, 1, np.random.default_rng(0))[0]
-    final = leastsq.minimise(problem, x, sigma)
+    final = minimiser.minimise(problem, x, sigma)
     print(f"{args.case}: {problem.n_flights} flights, {problem.dim} parameters; minimise from the first start: "
           f"{final.njev} Jacobians, cost {final.cost:.6f} ({final.message})")
     mu, nu, J = 1e-3, 2.0, None
     for it in range(args.steps):
         if J is None:
             c0, parts, prior = cost(problem, sigma, x)
-            J = leastsq.jacobian_blocks(x, problem, sigma)
+            J = residuals.jacobian_blocks(x, problem, sigma)
             g = J.gradient(parts, prior)
             H = J.information()
         step = H.solve(-g, mu)

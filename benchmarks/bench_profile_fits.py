@@ -1,7 +1,7 @@
 """Benchmark of the profile-likelihood fits (issue 18): Jacobians per point, time of the profile stage and
 the fits' accuracy, for four settings of the fits, on ``bench_scale.py``'s synthetic data sets:
 
-* ``far, cost stop``: Levenberg–Marquardt started at the far-start damping (``leastsq.MU_FAR``, 10⁻³), stopped
+* ``far, cost stop``: Levenberg–Marquardt started at the far-start damping (``minimiser.MU_FAR``, 10⁻³), stopped
   when a step lowers the deviance by less than ``profile.DEVIANCE_TOL``, the point's covariance from one more
   Jacobian (every fit before stop 39);
 * ``near, cost stop``: the same from the near-start damping (``MU_NEAR``, 10⁻⁶: stop 39);
@@ -37,34 +37,34 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from bench_scale import write_case  # noqa: E402
 
-from bayes_disc.inference.fitting import leastsq, profile  # noqa: E402
+from bayes_disc.inference.fitting import leastsq, minimiser, profile, residuals  # noqa: E402
 from bayes_disc.inference.model.config import load_config  # noqa: E402
 from bayes_disc.inference.model.data import build_problem  # noqa: E402
 
 
 class _Counted:
-    """``leastsq.minimise`` counting its fits and Jacobians (put in place of profile.minimise), and
-    ``leastsq.jacobian_blocks`` counting the covariance Jacobians the profile computes itself (in place of
+    """``minimiser.minimise`` counting its fits and Jacobians (put in place of profile.minimise), and
+    ``residuals.jacobian_blocks`` counting the covariance Jacobians the profile computes itself (in place of
     profile.jacobian_blocks)."""
 
     def __init__(self):
         self.fits = self.jacobians = self.extra = 0
 
     def __call__(self, *args, **kwargs):
-        res = leastsq.minimise(*args, **kwargs)
+        res = minimiser.minimise(*args, **kwargs)
         self.fits += 1
         self.jacobians += res.njev
         return res
 
     def jacobian_blocks(self, *args, **kwargs):
         self.extra += 1
-        return leastsq.jacobian_blocks(*args, **kwargs)
+        return residuals.jacobian_blocks(*args, **kwargs)
 
 
-SETTINGS = {"far, cost stop": dict(mu0=leastsq.MU_FAR, dtol=0.0),
-            "near, cost stop": dict(mu0=leastsq.MU_NEAR, dtol=0.0),
-            "near, decrement stop": dict(mu0=leastsq.MU_NEAR, dtol=profile.DECREMENT_TOL, final=0.0),
-            "near, decrement stop, final step": dict(mu0=leastsq.MU_NEAR, dtol=profile.DECREMENT_TOL,
+SETTINGS = {"far, cost stop": dict(mu0=minimiser.MU_FAR, dtol=0.0),
+            "near, cost stop": dict(mu0=minimiser.MU_NEAR, dtol=0.0),
+            "near, decrement stop": dict(mu0=minimiser.MU_NEAR, dtol=profile.DECREMENT_TOL, final=0.0),
+            "near, decrement stop, final step": dict(mu0=minimiser.MU_NEAR, dtol=profile.DECREMENT_TOL,
                                                      final=profile.FINAL_DECREMENT)}
 
 
@@ -77,8 +77,8 @@ def deviance_errors(problem, ls, paths, cost0: float) -> np.ndarray:
                 continue
             free = np.ones(problem.dim, bool)
             free[path.index] = False
-            tight = leastsq.minimise(problem, point.theta, ls.sigma, free=free, max_nfev=100, xtol=1e-13, ftol=1e-13,
-                                     mu0=leastsq.MU_NEAR)
+            tight = minimiser.minimise(problem, point.theta, ls.sigma, free=free, max_nfev=100, xtol=1e-13, ftol=1e-13,
+                                     mu0=minimiser.MU_NEAR)
             out.append(point.deviance - 2.0 * (tight.cost - cost0))
     return np.array(out)
 
@@ -89,9 +89,9 @@ def one_case(n: int, seed: int, repeats: int, tmp: Path) -> None:
     cfg = load_config(write_case(folder, n, seed, ""))
     problem = build_problem(cfg)
     ls = leastsq.fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev)
-    r0 = leastsq.whitened_residuals(ls.theta, problem, ls.sigma)
+    r0 = residuals.whitened_residuals(ls.theta, problem, ls.sigma)
     cost0 = 0.5 * float(r0 @ r0)
-    scaled = leastsq.jacobian_blocks(ls.theta, problem, ls.sigma).information().scaled()[0].dense()
+    scaled = residuals.jacobian_blocks(ls.theta, problem, ls.sigma).information().scaled()[0].dense()
     ev = np.linalg.eigvalsh(scaled)[:3]
     print(f"{n} flights ({problem.dim} parameters): smallest eigenvalues of the scale-free information "
           f"{', '.join(f'{e:.2g}' for e in ev)}", flush=True)
@@ -109,7 +109,7 @@ def one_case(n: int, seed: int, repeats: int, tmp: Path) -> None:
                                               **SETTINGS[name])
                 times[name].append(time.perf_counter() - t0)
             finally:
-                profile.minimise, profile.jacobian_blocks = leastsq.minimise, leastsq.jacobian_blocks
+                profile.minimise, profile.jacobian_blocks = minimiser.minimise, residuals.jacobian_blocks
             result[name] = (paths, counted)
     for name, (paths, counted) in result.items():
         err = deviance_errors(problem, ls, paths, cost0)

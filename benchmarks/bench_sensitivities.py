@@ -1,7 +1,7 @@
 """Forward sensitivities against central differences: one flight's marker Jacobian (issue #18).
 
 Least squares, profile fits and the Fisher analysis take their Jacobians by central differences of the
-compiled integrator (``inference.leastsq.jacobian_blocks``: two lanes per parameter). Issue #18 asks
+compiled integrator (``inference.fitting.residuals.jacobian_blocks``: two lanes per parameter). Issue #18 asks
 whether forward sensitivities — the variational equations integrated alongside the state — are faster at
 equal accuracy. This benchmark measures it on each of the demo's four true flights:
 

@@ -294,7 +294,7 @@ def test_replicate_problem_is_what_the_replicates_fit_builds():
     noise, two least-squares starts), the replicate's flights and truth; at θ̃ (bayes_disc.inference.model.truth)
     the effective residuals over σ have mean square 1 − ρ² (the innovations, scaled by |W|^(−1/n))."""
     from bayes_disc.calibration.replicate import replicate_data, replicate_problem
-    from bayes_disc.inference.fitting.leastsq import flight_residuals
+    from bayes_disc.inference.fitting.residuals import flight_residuals
     from bayes_disc.inference.model.truth import truth_theta
     repo = Path(__file__).resolve().parents[1]
     cal = load_cal_config(repo / "runs/calibration/cal4_ar1.yaml")

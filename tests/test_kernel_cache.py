@@ -144,13 +144,13 @@ def _problem():
 
 
 def _residual_task(args):
-    from bayes_disc.inference.fitting.leastsq import whitened_residuals
+    from bayes_disc.inference.fitting.residuals import whitened_residuals
     problem, x = args
     return whitened_residuals(x, problem, np.array([1e-3]))
 
 
 def test_pools_work_under_spawn():
-    from bayes_disc.inference.fitting.leastsq import whitened_residuals
+    from bayes_disc.inference.fitting.residuals import whitened_residuals
     problem, theta = _problem()
     spins = [-40.0, -60.0]
     here_sim = [_simulate_task(s) for s in spins]

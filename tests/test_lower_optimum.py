@@ -12,7 +12,9 @@ from bayes_disc.diagnostics import run as diag_run
 from bayes_disc.inference.fitting import profile
 from bayes_disc.inference.model.config import load_config
 from bayes_disc.inference.model.initial import initial_state_from_data
-from bayes_disc.inference.fitting.leastsq import minimise, refine_least_squares, whitened_residuals
+from bayes_disc.inference.fitting.minimiser import minimise
+from bayes_disc.inference.fitting.leastsq import refine_least_squares
+from bayes_disc.inference.fitting.residuals import whitened_residuals
 from bayes_disc.inference.model.problem import Problem
 from bayes_disc.inference.fitting.profile import (LOWER_OPTIMUM_DEVIANCE, LowerOptimum, lowest_point, profile_paths,
                                                   profile_side, ridge_first)

@@ -8,7 +8,8 @@ from scipy.integrate import quad
 from scipy.stats import multivariate_normal
 
 from bayes_disc.inference.model.initial import initial_state_from_data
-from bayes_disc.inference.fitting.leastsq import _rms, jacobian_blocks, refine_least_squares
+from bayes_disc.inference.fitting.leastsq import _rms, refine_least_squares
+from bayes_disc.inference.fitting.residuals import jacobian_blocks
 from bayes_disc.inference.model.problem import Problem
 from bayes_disc.observation.markers import FlightObservation, flights_from_table, read_marker_csv
 from bayes_disc.observation.models import MarkerPositions, gaussian_marginal_loglik

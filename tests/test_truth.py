@@ -1,7 +1,7 @@
 """θ at the truth of a synthetic data set (bayes_disc.inference.model.truth)."""
 import numpy as np
 
-from bayes_disc.inference.fitting.leastsq import flight_residuals
+from bayes_disc.inference.fitting.residuals import flight_residuals
 from bayes_disc.inference.model.problem import Problem
 from bayes_disc.inference.model.truth import truth_theta
 from bayes_disc.observation.models import MarkerPositions

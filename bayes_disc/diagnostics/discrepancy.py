@@ -32,8 +32,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..inference.fitting.leastsq import (covariance_from_jacobian, refine_least_squares, whitened_jacobian,
-                                         whitened_residuals)
+from ..inference.fitting.covariance import covariance_from_jacobian
+from ..inference.fitting.leastsq import refine_least_squares
+from ..inference.fitting.residuals import whitened_jacobian, whitened_residuals
 from ..physics.discrepancy import COLUMNS, DISCREPANCY, DIRECTIONS, FUNCTIONS, basis, column_name
 from .missing_physics import (SHARE_PARTIAL, ModelFit, excess_share, extend_theta, model_fit, replicating_flights,
                               structured)

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..inference.fitting.arrow import ArrowJacobian
-from ..inference.fitting.leastsq import jacobian_blocks
+from ..inference.fitting.residuals import jacobian_blocks
 from ..inference.model.problem import Problem
 from ..observation.markers import FlightObservation
 from ..observation.models import MarkerPositions
@@ -97,7 +97,7 @@ def coefficient_information(problem: Problem, J: ArrowJacobian) -> np.ndarray:
     ----------
     problem : Problem
     J : ArrowJacobian
-        Whitened Jacobian over every parameter (:func:`~bayes_disc.inference.fitting.leastsq.jacobian_blocks`).
+        Whitened Jacobian over every parameter (:func:`~bayes_disc.inference.fitting.residuals.jacobian_blocks`).
 
     Returns
     -------

@@ -66,9 +66,10 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..physics.parallel import mp_context
-from ..inference.fitting.leastsq import (LeastSquaresResult, jacobian_blocks, minimise, refine_least_squares,
-                                         whitened_residuals)
-from ..inference.fitting.leastsq import flight_residuals as flight_residuals_whitened
+from ..inference.fitting.leastsq import LeastSquaresResult, refine_least_squares
+from ..inference.fitting.residuals import jacobian_blocks, whitened_residuals
+from ..inference.fitting.minimiser import minimise
+from ..inference.fitting.residuals import flight_residuals as flight_residuals_whitened
 from ..inference.model.problem import Problem
 from ..observation.models.markers import MarkerPositions
 from ..observation.registry import DATA_EXPLANATION, MODEL_EXTENSIONS, unit

@@ -30,7 +30,8 @@ import numpy as np
 
 from ..inference.model.config import RunConfig
 from ..inference.model.data import build_problem
-from ..inference.fitting.leastsq import fit_least_squares, jacobian_blocks, noise_text
+from ..inference.fitting.leastsq import fit_least_squares, noise_text
+from ..inference.fitting.residuals import jacobian_blocks
 from ..inference.fitting.profile import profiles_through_lowest
 from ..inference.run import RESULT
 from .identifiability import (ALPHA_PAIRS, coefficient_information, data_description, describe_throw,

@@ -29,7 +29,8 @@ from ..observation.models import MarkerPositions
 from .model.config import RunConfig
 from .model.data import build_problem
 from .model.inertial import load_run_throws
-from .fitting.leastsq import FAILED_RESIDUAL, fit_least_squares
+from .fitting.residuals import FAILED_RESIDUAL
+from .fitting.leastsq import fit_least_squares
 
 log = logging.getLogger(__name__)
 

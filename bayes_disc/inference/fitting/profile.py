@@ -40,7 +40,9 @@ import numpy as np
 
 from ...physics.parallel import mp_context
 from .arrow import ArrowJacobian
-from .leastsq import MU_NEAR, LeastSquaresResult, jacobian_blocks, minimise, refit_from_lower, whitened_costs
+from .minimiser import MU_NEAR, minimise
+from .leastsq import LeastSquaresResult, refit_from_lower
+from .residuals import jacobian_blocks, whitened_costs
 from ..model.problem import Problem
 
 #: the path stops past this profile deviance (≈ 3.5 σ for a Gaussian)
@@ -63,7 +65,7 @@ DEVIANCE_TOL = 1e-3
 #: 9.2·10⁻⁴ and 3.5 Jacobians per point instead of 4.1 (``benchmarks/bench_profile_fits.py``)
 DECREMENT_TOL = 0.25 * DEVIANCE_TOL
 #: a profile fit whose Gauss–Newton decrement is at most this (cost units; deviance 5·10⁻³) takes one more step
-#: and stops there if the step gains what the model predicted, to DECREMENT_TOL (:func:`.leastsq.minimise`'s
+#: and stops there if the step gains what the model predicted, to DECREMENT_TOL (:func:`.minimiser.minimise`'s
 #: ``final_step``); the point's covariance then comes from the Jacobian one step before it. With many flights the
 #: Gauss–Newton iteration converges linearly near a profile point (decrements ×0.3–0.6 per Jacobian on 24 flights,
 #: ×10⁻³ on 4: the residual curvature it drops grows with the ridges), so the last Jacobians bought digits no
@@ -323,8 +325,8 @@ def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, cov0: np.nda
     (seed 19 of ``benchmarks/bench_scale.py``, the ten coefficients' profiles: 268 → 233 Jacobians at 4 flights,
     342 → 296 at 24), and the held start guards a curved ridge where the predictions overshoot. The starts
     are next to the constrained optimum, so the fit starts with little damping ``mu0``
-    (:data:`.leastsq.MU_NEAR`: 3.0–3.1 Jacobians per fit at 4–24 flights, against 4.2–6.6 with
-    :data:`.leastsq.MU_FAR`). It stops when the Gauss–Newton decrement (the cost decrease its quadratic model
+    (:data:`.minimiser.MU_NEAR`: 3.0–3.1 Jacobians per fit at 4–24 flights, against 4.2–6.6 with
+    :data:`.minimiser.MU_FAR`). It stops when the Gauss–Newton decrement (the cost decrease its quadratic model
     still expects) is at most ``dtol`` — the Jacobian there is the point's own, so none is computed twice —;
     after one more step from a decrement at most ``final`` whose gain is as predicted (to ``dtol``); and
     when a step lowers the deviance 2 Δcost by less than :data:`DEVIANCE_TOL` (``cost0``: the optimum's cost,
@@ -362,7 +364,7 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
     (module docstring) has fallen by ``max_deviance``/2 from its highest value on that side, or after
     ``extended_points`` points (:func:`side_done`); and at a point below the optimum (deviance
     < −:data:`LOWER_OPTIMUM_DEVIANCE`: θ̂ was not the lowest point). The two sides start from θ̂ and do not
-    depend on each other. ``mu0`` is every fit's initial damping (:func:`.leastsq.minimise`), ``dtol`` its
+    depend on each other. ``mu0`` is every fit's initial damping (:func:`.minimiser.minimise`), ``dtol`` its
     decrement tolerance (:func:`_fixed_fit`).
 
     Returns
