@@ -618,7 +618,7 @@ def compare(run_dirs):
         If fewer than two runs are given, a run has no pointwise log-likelihood, or the runs' observed
         marker points differ.
     """
-    from .inference.results.results import compare_runs
+    from .inference.results.compare import compare_runs
 
     def folder(run):
         return run.output if isinstance(run, SampleResult) else run

@@ -104,7 +104,7 @@ def _cmd_calibrate(args) -> int:
 def _cmd_compare(args) -> int:
     import json
     from .api import compare
-    from .inference.results.results import run_label
+    from .inference.results.compare import run_label
     try:
         table = compare(args.run_dirs)
     except (ValueError, FileNotFoundError) as e:

@@ -51,7 +51,7 @@ def _laplace_run(problem, ls, folder, seed: int):
     model is far from linear (and out of the prior's support)."""
     import numpy as np
 
-    from bayes_disc.inference.results.results import build_inference_data
+    from bayes_disc.inference.results.idata import build_inference_data
     from bayes_disc.inference.sampling.chains import Chains
     rng = np.random.default_rng(seed)
     n_ens, n_steps, n_w = 2, 40, 8

@@ -357,7 +357,8 @@ def test_ar1_and_per_point_run_through_the_outputs(folder):
     """Fake chains around the truth through σ draws, posterior.nc (rho with a flight dimension, pointwise
     log-likelihood = the exact conditional log-likelihood, predictive draws) and summary.json."""
     from bayes_disc.inference.model.data import build_problem
-    from bayes_disc.inference.results.results import build_inference_data, build_summary
+    from bayes_disc.inference.results.idata import build_inference_data
+    from bayes_disc.inference.results.summary import build_summary
     from bayes_disc.inference.run import noise_info, noise_words
     from bayes_disc.inference.sampling.chains import Chains
     cfg = _config(folder, "r", "flight_options: {a: {noise: {model: ar1, per_point: false}}}")

@@ -15,9 +15,11 @@ import pytest
 from bayes_disc.inference.model.config import load_config
 from bayes_disc.inference.model.data import build_problem
 from bayes_disc.inference.sampling.mcmc_stats import rhat
-from bayes_disc.inference.results.results import (build_inference_data, build_summary, compare_runs, ensemble_view,
-                                                  load_posterior, pointwise_log_likelihood, posterior_draws,
-                                                  summarize, summary_names, write_posterior, writing_posterior)
+from bayes_disc.inference.results.idata import build_inference_data, pointwise_log_likelihood
+from bayes_disc.inference.results.summary import build_summary, summarize, summary_names
+from bayes_disc.inference.results.compare import compare_runs
+from bayes_disc.inference.results.draws import ensemble_view, posterior_draws
+from bayes_disc.inference.results.posterior_file import load_posterior, write_posterior, writing_posterior
 from bayes_disc.inference.sampling.chains import Chains
 from bayes_disc.inference.model.truth import truth_theta
 from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth

@@ -196,7 +196,7 @@ def run_replicate(cal: CalConfig, index: int) -> dict:
         ``sampler_seed``, ``host``, ``wall_time_s``; the defects injected (per flight, when any).
     """
     from ..api import sample
-    from ..inference.results.results import posterior_draws
+    from ..inference.results.draws import posterior_draws
     t0 = time.perf_counter()
     result, truth, redraws, sampler_seed = replicate_data(cal, index)
     with tempfile.TemporaryDirectory(prefix=f"bd-cal-{index:05d}-") as tmp:

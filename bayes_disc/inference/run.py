@@ -34,7 +34,10 @@ from ..observation.models import MarkerPositions
 from .model.data import build_problem
 from .model.inertial import load_run_throws
 from .fitting.leastsq import START_FLIGHTS, fit_least_squares, noise_text
-from .results.results import build_inference_data, build_summary, format_table, prior_record, writing_posterior
+from .results.idata import build_inference_data
+from .results.summary import build_summary, format_table
+from .results.draws import prior_record
+from .results.posterior_file import writing_posterior
 from .fitting.profile import MAX_LOWER_REFITS, lowest_point, profiles_through_lowest
 from .fitting.robust import (FLAGGED, JUDGEMENT_AVERAGE, average_over_judgement, gross_error_advice, robust_flights,
                              robust_refit, suspected_gross_errors, with_saved_flags)

@@ -175,7 +175,7 @@ def coefficient_table(ctx) -> Section:
         rows.append(row)
     coef_html = table(heads, rows, "num")
     # per-flight quantities: noise scales, initial conditions, the flight's own observation-model parameters
-    from ..inference.results.results import flight_entries
+    from ..inference.results.draws import flight_entries
     flights = ctx.flight_names
     problem = ctx.problem
     where = {}
