@@ -77,16 +77,6 @@ TIME_OFFSET = DataExplanation(
 EXPLANATIONS: dict[str, DataExplanation] = {e.id: e for e in (MARKER_GEOMETRY, TIME_OFFSET)}
 
 
-def get_explanations(ids) -> tuple[DataExplanation, ...]:
-    """Explanations by SPEC id, in the order given; unknown ids raise KeyError naming the known ones."""
-    out = []
-    for i in ids:
-        if i not in EXPLANATIONS:
-            raise KeyError(f"unknown data explanation {i!r}; known: {sorted(EXPLANATIONS)}")
-        out.append(EXPLANATIONS[i])
-    return tuple(out)
-
-
 def predicted_markers(states: np.ndarray, marker_body: np.ndarray, body_offset: np.ndarray | None,
                       time_offset: np.ndarray | None, times: np.ndarray | None = None) -> np.ndarray:
     """Markers (B, n, m, 3) [m] from states (B, n, 13) at ``times`` (n,) [s], body positions b (m, 3), body

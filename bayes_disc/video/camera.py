@@ -181,10 +181,6 @@ class Camera:
         """Pixels (..., 2) → ideal (undistorted) normalised coordinates (..., 2)."""
         return self.undistort_normalized(self.pixel_to_distorted(uv))
 
-    def undistort_to_pixels(self, uv) -> np.ndarray:
-        """Pixels (..., 2) → pixels of the same camera without distortion (..., 2)."""
-        return self.normalized_to_pixel(self.undistort_pixels(uv))
-
     def project(self, X) -> np.ndarray:
         """World points X (..., 3) [m] → pixels (..., 2), distortion applied (NaN behind the camera)."""
         Xc = self.to_camera(X)

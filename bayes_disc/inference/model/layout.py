@@ -128,10 +128,6 @@ class ParameterLayout:
 
     # -- slices ---------------------------------------------------------------------------------------------
     @property
-    def coef_slice(self) -> slice:
-        return slice(0, self.n_coef)
-
-    @property
     def ext_slice(self) -> slice:
         return slice(self.n_coef, self.ic_start)
 
