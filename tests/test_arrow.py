@@ -1,5 +1,5 @@
 """Block-arrow normal equations (bayes_disc.inference.fitting.arrow) and the Levenberg–Marquardt minimiser built on
-them (issue 18): the structured solves against dense linear algebra, and the new solver's optimum and
+them: the structured solves against dense linear algebra, and the new solver's optimum and
 covariance against scipy's dense trust-region fit on a small problem."""
 import numpy as np
 import pytest

@@ -178,7 +178,7 @@ def test_truths_drawn_from_an_around_prior_are_the_fits_prior():
 
 # ------------------------------------------------------------------------------- a campaign on Dask
 def test_tiny_campaign_on_two_workers_resumes_without_redoing(tmp_path, capsys):
-    """Two replicates, then three with replicate 0 deleted: only 0 and 2 run again; SPEC §6 keys."""
+    """Two replicates, then three with replicate 0 deleted: only 0 and 2 run again; the keys of docs/outputs.md."""
     p = tmp_path / "cal.yaml"
     p.write_text(TINY.format(n=2))
     assert main(["calibrate", str(p), "--workers", "2", "--no-progress"]) == 0

@@ -1,4 +1,4 @@
-"""Least squares on many flights (issue 18): starts fitted on the most informative flights, the others joined
+"""Least squares on many flights: starts fitted on the most informative flights, the others joined
 to the best start, and the step-length correction of fits started next to an optimum
 (bayes_disc.inference.fitting.leastsq: informative_flights, join_flights; .minimiser: step_length)."""
 import numpy as np

@@ -1,4 +1,4 @@
-"""Correlated noise is not missing physics: `diagnose` tells them apart (issue 16)."""
+"""Correlated noise is not missing physics: `diagnose` tells them apart."""
 import json
 from dataclasses import replace
 

@@ -1,4 +1,4 @@
-"""The learned discrepancy (issue 17): its term, the sparse selection, coefficient curves, held parameters.
+"""The learned discrepancy: its term, the sparse selection, coefficient curves, held parameters.
 
 The end-to-end proof (a concealed ground effect with another decay law learned as a function of height
 whose curve follows the generating one) is the slow test at the end.

@@ -1,4 +1,4 @@
-"""Term families and forms of nature (issue 17): effects whose form in nature differs from every formula of
+"""Term families and forms of nature: effects whose form in nature differs from every formula of
 the library.
 
 Fast: each family's shape parameters at their off values give the original formula exactly; each form of
@@ -45,8 +45,8 @@ def _term_flight(term_id, values):
 
 @pytest.mark.parametrize("term_id", sorted(ORIGINAL))
 def test_family_at_off_shape_is_the_original_formula(term_id):
-    """Shape parameters at their off values reproduce the formula of SPEC §2's term; moving one changes the
-    flight."""
+    """Shape parameters at their off values reproduce the formula of the term in docs/conventions.md; moving one
+    changes the flight."""
     term = TERMS[term_id]
     shape = [p for p in term.parameters if p.name not in ORIGINAL[term_id]]
     assert shape, f"{term_id} has no shape parameter"

@@ -44,7 +44,7 @@ def test_single_narrow_flight_leaves_alpha_slopes_unidentified(narrow):
     for name in ("CLa", "CDa", "CMa"):
         assert narrow[name]["verdict"] != "identified", (name, narrow[name])
         assert "α spans" in narrow[name]["reason"]
-    # SPEC §6: a verdict and a reason per coefficient
+    # docs/outputs.md: a verdict and a reason per coefficient
     for name in COEFS:
         assert narrow[name]["verdict"] in ("identified", "weak", "unidentified") and narrow[name]["reason"]
     # the weakest direction is named as a combination

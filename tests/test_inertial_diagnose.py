@@ -118,7 +118,7 @@ def test_inertial_residual_series_white_at_the_truth_and_structured_without_the_
     rms = truth.rms
     assert set(rms["a"]) == {"gyro", "acc"} and rms["a"]["acc"]["unit"] == "m/s²"
     assert abs(rms["a"]["acc"]["rms"] / SPEC.acc_noise[0] - 1) < 0.15
-    assert truth.rms_mm == {}                                   # no markers: no SPEC mm entry
+    assert truth.rms_mm == {}                                   # no markers: no mm entry
     assert "gyro" in rms_text(rms) and "m/s²" in rms_text(rms)
     off = theta.copy()
     off[p.layout.index("CY")] = 0.0

@@ -1,4 +1,4 @@
-"""The posterior averaged over the judgement of outliers and label swaps (issue 16, robust noise): the
+"""The posterior averaged over the judgement of outliers and label swaps (robust noise): the
 mixture likelihood of a recording as given against brute-force enumeration and the Gaussian it reduces to,
 σ integrated out against numerical quadrature, and the importance reweighting of a run's draws."""
 from itertools import combinations, product

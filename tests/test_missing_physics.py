@@ -172,7 +172,7 @@ def test_reach_is_where_a_term_acts_beyond_the_launch(tmp_path):
 # -- end to end ---------------------------------------------------------------------------------------
 
 def test_diagnose_names_a_concealed_side_force(tmp_path, capsys):
-    """The command on data with a concealed side force: SPEC §6 file, words, the right term, the gain."""
+    """The command on data with a concealed side force: the file of docs/outputs.md, words, the right term, the gain."""
     cfg = make_run(tmp_path, CONCEALED["side_force"], seed=3)
     assert main(["diagnose", str(cfg), "--no-sample", "--processes", "2"]) == 0   # forked candidate fits
     out = capsys.readouterr().out

@@ -1,4 +1,4 @@
-"""Marker noise models (issue 16, likelihoods): per-point errors and AR(1) noise against brute-force densities,
+"""Marker noise models (likelihoods): per-point errors and AR(1) noise against brute-force densities,
 σ integrated out against numerical integration, least squares on defective data, the plain model unchanged."""
 from dataclasses import replace
 
@@ -550,7 +550,7 @@ def test_sample_with_robust_and_ar1_noise_writes_the_flags(tmp_path, monkeypatch
 
 @pytest.mark.slow
 def test_four_flights_with_outliers_and_swaps_sampled_inside_the_clean_intervals(tmp_path, monkeypatch):
-    """Issue 16: four flights with 2–6 cm outliers on 1 % of the points and labels swapped in a few frames,
+    """Four flights with 2–6 cm outliers on 1 % of the points and labels swapped in a few frames,
     sampled with ``noise.model: robust``: every injected defect is listed, and every coefficient's median
     lies inside the 90 % interval of the same data without the defects (sampled with the plain model), both
     given the judgement and averaged over it."""

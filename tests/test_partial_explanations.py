@@ -1,6 +1,6 @@
 """Partial explanations in ``bayes-disc diagnose``: the noise floor, the share of the excess misfit a
 candidate removes, and the adoption of the best partial explanation when nature does not use the library's
-formula (issue 17).
+formula.
 
 The end-to-end case conceals two effects: a ground effect with a Gaussian decay (a form of nature, not
 the library's exp(−z/h) family) and a small side force that saturates with spin, of a kind the diagnosis is

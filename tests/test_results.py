@@ -135,7 +135,7 @@ def test_posterior_has_flight_dimension_and_ensemble_walker_coords(base, folder)
     k = problem.names.index("vz_b")
     np.testing.assert_array_equal(post["vz"].sel(flight="b").values[N_W + 2], chains.chain[1, :, 2, k])
     np.testing.assert_array_equal(posterior_draws(post, "sigma_a")[3], chains.sigma[0, :, 3, 0])
-    # summary.json keeps SPEC §6's flat names, read back from the flight dimension
+    # summary.json keeps the flat names of docs/outputs.md, read back from the flight dimension
     for n in problem.names + problem.sigma_names:
         assert summary["parameters"][n]["mean"] == pytest.approx(posterior_draws(post, n).mean(), rel=1e-12)
 

@@ -58,7 +58,7 @@ def test_same_seed_same_summary_and_outputs(tmp_path):
     for f in a["flights"]:
         a["flights"][f].pop("file"), b["flights"][f].pop("file")
     assert a == b
-    # SPEC §6 keys for every coefficient and the flight's σ
+    # the keys of docs/outputs.md for every coefficient and the flight's σ
     for name in ["CL0", "CLa", "CD0", "CDa", "CM0", "CMa", "CMq", "CRr", "CRp", "CNr", "sigma_short"]:
         assert set(a["parameters"][name]) >= {"mean", "sd", "q05", "q50", "q95", "r_hat", "ess_bulk"}
     assert set(a["parameters"]["CLa"]) >= {"ess_tail", "mcse_mean", "mcse_sd", "r_hat_walkers"}
@@ -205,8 +205,8 @@ class _StudentT:
 
 def _with_defensive_t(q, samples: np.ndarray, nu: float = 4.0):
     """``q`` made defensive by an equal share of a Student t (ν = 4) on the samples' moments: heavier tails
-    than a Gaussian's, where the posterior's valley runs past every ridge component. On the four-flight run
-    of stop 39 a Gaussian share (sd × 1.2, 1.5 or 2) left Pareto k̂ at 0.81 (stop 38's run: 0.809, 0.001
+    than a Gaussian's, where the posterior's valley runs past every ridge component. On a four-flight run
+    a Gaussian share (sd × 1.2, 1.5 or 2) left Pareto k̂ at 0.81 (an earlier run's: 0.809, 0.001
     inside the rule), the t share 0.72."""
     from bayes_disc.inference.sampling.proposals import CompositeProposal
     t = _StudentT(samples.mean(axis=0), np.cov(samples.T), nu)

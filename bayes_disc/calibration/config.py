@@ -102,7 +102,7 @@ class CalConfig:
 
     @property
     def names(self) -> list[str]:
-        """The coefficients whose calibration is measured (SPEC §2 names)."""
+        """The coefficients whose calibration is measured (names as in docs/conventions.md)."""
         return list(COEFFICIENT_NAMES)
 
     def key(self) -> dict:

@@ -2,7 +2,7 @@
 
 Writes into the run's output folder:
 
-* ``diagnosis.json`` (SPEC §6): verdict, accepted effects ranked best first ({id, evidence (ΔBIC),
+* ``diagnosis.json`` (docs/outputs.md): verdict, accepted effects ranked best first ({id, evidence (ΔBIC),
   estimate, where}, with ``status`` — ``explains`` or ``partially_explains`` — and ``share_explained``,
   the share of the base model's excess misfit the term removes with those before it), marker RMS per
   flight before/after [mm] (``rms_before_mm``, ``rms_after_mm``: the flights with markers); ``rms_before``/``rms_after``: every flight's RMS per recorded quantity
@@ -544,7 +544,7 @@ def run_diagnose(cfg: RunConfig, sample: bool = True, processes: int = 2, progre
     Returns
     -------
     dict
-        The content of ``diagnosis.json`` (SPEC §6): ``verdict``, ``effects`` ranked best first, RMS per flight
+        The content of ``diagnosis.json`` (docs/outputs.md): ``verdict``, ``effects`` ranked best first, RMS per flight
         before and after [mm] (``rms_before_mm``, ``rms_after_mm``), and the details listed in the module
         docstring (``words``: the diagnosis in words).
     """

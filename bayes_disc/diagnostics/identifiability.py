@@ -27,7 +27,7 @@ recomputed from the posterior samples (:func:`verdicts_from_covariance` on their
   candidates are marker flights (positions at 120 Hz); a run without marker data gets no design
   (:func:`design_skip_reason`).
 
-Inertial recordings (SPEC §4b) enter the same Fisher information: every flight's own parameters (initial
+Inertial recordings (docs/data-formats.md) enter the same Fisher information: every flight's own parameters (initial
 conditions, and for a logger its row period, biases and filter state) are the nuisance block, the logger's
 shared mount (r_s, τ, tilt) sits beside the coefficients. A logger measures rotation rates and specific
 force, not position: the airspeed and the angle of attack reach the data only through the dynamics (the

@@ -162,7 +162,7 @@ class ModelFit:
 
     @property
     def rms_mm(self) -> dict:
-        """{flight: marker RMS [mm] per coordinate} of the flights with markers (SPEC §6)."""
+        """{flight: marker RMS [mm] per coordinate} of the flights with markers (docs/outputs.md)."""
         return {f: d["markers"]["rms"] * 1e3 for f, d in self.rms.items() if "markers" in d}
 
 

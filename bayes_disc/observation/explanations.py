@@ -1,6 +1,6 @@
 """Data explanations: ways the recordings, rather than the flight physics, can disagree with the model.
 
-Each explanation is one small unit like a physics term (:class:`bayes_disc.physics.Term`): SPEC id,
+Each explanation is one small unit like a physics term (:class:`bayes_disc.physics.Term`): an id,
 title, equations and parameters with units and prior scales, plus ``apply``, which turns simulated
 states into predicted marker positions. The model then predicts marker j at sample time t as
 
@@ -29,7 +29,7 @@ from ..physics.frames import quat_from_rotvec, quat_multiply, quat_to_matrix
 
 @dataclass(frozen=True)
 class DataExplanation:
-    """A data explanation: SPEC id, title, equations, its parameters for given marker ids, and ``offsets``
+    """A data explanation: id, title, equations, its parameters for given marker ids, and ``offsets``
     mapping parameter values (B, k) to (Δ (B, m, 3) body offsets [m], δ (B, m) timing offsets [s])."""
 
     id: str

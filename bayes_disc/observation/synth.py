@@ -11,7 +11,7 @@ recordings whose markers sit elsewhere on the disc or are recorded at shifted ti
 forms of physics that no formula of the library has (:mod:`bayes_disc.physics.nature`: a ground effect
 with another decay law, the wind-tunnel table's α-dependence, a power-law wind shear, a saturating side
 force), to see what ``diagnose`` makes of effects that do not follow the library's formulas.
-Output: a SPEC §4 marker file and a truth JSON (coefficients, terms, initial states, noise).
+Output: a marker file (docs/data-formats.md) and a truth JSON (coefficients, terms, initial states, noise).
 
 An ``imu:`` block adds what an inertial logger fixed in the disc records during the same flights
 (:mod:`.inertial_synth`): sensor position ``offset`` [m], accelerometer filter ``lpf_tau`` [s], ``tilt``
@@ -563,7 +563,7 @@ def write_synth(result: SynthResult, markers_path, truth_path) -> None:
     result : SynthResult
         From :func:`synthesize`.
     markers_path, truth_path : str or Path
-        Marker CSV (SPEC §4) and truth JSON; the inertial logs go where ``result.imu.output`` says
+        Marker CSV (docs/data-formats.md) and truth JSON; the inertial logs go where ``result.imu.output`` says
         (flatball-ins: ``<output>/<flight>.csv``, one per flight; imu-csv: one file).
     """
     write_marker_csv(markers_path, table_from_flights(result.flights))

@@ -1,6 +1,6 @@
 """Pinhole camera with OpenCV lens distortion.
 
-Conventions (OpenCV): a world point X (m, SPEC §1 world frame) has camera coordinates
+Conventions (OpenCV): a world point X (m, world frame of docs/conventions.md) has camera coordinates
 ``Xc = R X + t`` (camera x right, y down, z forward along the optical axis); the ideal normalised image
 point is ``x = (Xc/Zc, Yc/Zc)``; lens distortion maps it to ``x_d`` with the OpenCV model
 

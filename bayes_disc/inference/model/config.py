@@ -1,6 +1,6 @@
-"""Run configuration (SPEC §5 subset plus bayes-disc's own keys), validated up front.
+"""Run configuration (docs/configuration.md plus bayes-disc's own keys), validated up front.
 
-Keys beyond SPEC §5 (all optional):
+Keys beyond those of docs/configuration.md (all optional):
 
 ```yaml
 sampler:                 # emcee settings
@@ -190,7 +190,7 @@ def load_config(path, output_override=None) -> RunConfig:
     Parameters
     ----------
     path : str or Path
-        The configuration file (SPEC §5 plus the keys of this module's docstring); relative paths in it
+        The configuration file (docs/configuration.md plus the keys of this module's docstring); relative paths in it
         resolve against its folder.
     output_override : str or Path, optional
         Replaces the configuration's output folder.

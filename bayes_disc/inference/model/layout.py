@@ -1,6 +1,6 @@
 """The parameter layout: the one place that knows what every entry of θ is.
 
-θ = [ the ten coefficients (SPEC §2) |
+θ = [ the ten coefficients (docs/conventions.md) |
       extension: physics-term parameters, data-explanation parameters, then the parameters the
       observation models share across flights (e.g. the logger's position) |
       per flight f: initial conditions, then the flight's own observation-model parameters ]

@@ -1,4 +1,4 @@
-"""θ at the truth of a synthetic data set (``bayes-disc synth``'s truth JSON, SPEC §5).
+"""θ at the truth of a synthetic data set (``bayes-disc synth``'s truth JSON, docs/configuration.md).
 
 Used where a known truth is compared with what the fit reports: calibration checks at the truth, recovery
 benchmarks and tests. Entries the truth JSON does not give (physics-term parameters, explanations, noise

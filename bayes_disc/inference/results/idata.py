@@ -8,7 +8,7 @@ Layout of ``posterior.nc`` (ArviZ InferenceData; :func:`build_inference_data`):
   ``ensemble[c]``), ``draw`` is the kept step after burn-in. Coefficients and extra-term parameters are
   scalar variables (``CLa``, ``CY`` …); each flight's initial conditions (``x y z vx vy vz th1 th2 th3 wx wy
   wz``, units in their ``units`` attribute) and noise scale ``sigma`` [m] have a ``flight`` dimension.
-  summary.json keeps the flat names of SPEC §6: ``x_<flight>`` is ``posterior["x"].sel(flight=<flight>)``,
+  summary.json keeps the flat names of docs/outputs.md: ``x_<flight>`` is ``posterior["x"].sel(flight=<flight>)``,
   ``sigma_<flight>`` is ``posterior["sigma"].sel(flight=<flight>)`` (:func:`posterior_draws` reads either).
 * ``sample_stats``: ``lp``, the log-posterior of θ (σ integrated out) of every sample.
 * ``log_likelihood``: ``markers`` (chain, draw, point), pointwise log-likelihood of every observed marker

@@ -1,4 +1,4 @@
-"""Posterior summaries (SPEC §6 ``summary.json``) and the terminal table.
+"""Posterior summaries (``summary.json``, docs/outputs.md) and the terminal table.
 
 R-hat: ``summary.json``'s ``r_hat`` is the rank-normalised split R-hat with the independent *ensembles* as
 chains (walkers of an ensemble pooled step by step: the sampler's stopping rule), i.e.
@@ -86,7 +86,7 @@ def literature_table() -> dict:
 
 
 def build_summary(problem: Problem, chains: Chains, idata, ls_dict: dict, cfg_info: dict, threads: int = 1) -> dict:
-    """summary.json (SPEC §6) of a run: parameter records (:func:`summarize`, in ``threads`` threads),
+    """summary.json (docs/outputs.md) of a run: parameter records (:func:`summarize`, in ``threads`` threads),
     convergence, literature."""
     params = summarize(idata, summary_names(problem), threads)
     coef = list(COEFFICIENT_NAMES) + problem.ext_names

@@ -13,7 +13,7 @@ from .proposals import CompositeProposal, Proposal, RidgeProposal
 
 
 # The Metropolis–Hastings share is all independence jumps. Preconditioned Crank–Nicolson steps (ρ = 0.97)
-# on the Gaussian reference had half of it until stop 31; measured from stationary walkers of
+# on the Gaussian reference once had half of it; measured from stationary walkers of
 # benchmarks/bench_scale.py's kept runs (benchmarks/bench_moves.py: acceptance and mean squared jump in posterior sds),
 # they were accepted 0.7 % (4 flights), 0.3 % (12) and 0.0 % (24) of the time and moved the coefficients
 # by 0.005 sd² per proposal, against 10 %, 10 % and 3 % and 1.7, 1.9 and 0.6 sd² for the independence
@@ -23,7 +23,7 @@ from .proposals import CompositeProposal, Proposal, RidgeProposal
 # 175–350), τ 14.3 → 12.8 and 18.6 → 15.8 steps.
 
 #: Share of the Metropolis–Hastings moves given to ridge carries (:class:`.moves.RidgeCarry`) when the
-#: independence proposal has ridge proposals; the rest are independence jumps. Measured at stop 38 from the
+#: independence proposal has ridge proposals; the rest are independence jumps. Measured from the
 #: stationary walkers of seed 18's kept runs (benchmarks/bench_scale.py, one move alone for 20 steps):
 #: ridge carries accepted 27 %, 36 %, 35 % at 4, 12, 24 flights with mean squared jumps of 0.41–0.71,
 #: 0.44–0.88, 0.36–0.76 posterior variances per coefficient and step, independence jumps 13 %, 14 %, 6 %
