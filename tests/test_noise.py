@@ -17,6 +17,8 @@ from bayes_disc.observation.models.noise import AR1Noise, WhiteNoise, frame_inde
 from bayes_disc.observation.synth import DEFAULT_MARKERS, LaunchSpec, SynthSpec, synthesize
 from bayes_disc.physics import Disc, Environment, literature_coefficients
 
+from conftest import run_config, write_two_flights
+
 MB = np.array(list(DEFAULT_MARKERS.values()))
 IDS = tuple(DEFAULT_MARKERS)
 
@@ -297,28 +299,14 @@ def test_plain_gaussian_log_prob_is_unchanged_on_the_demo_data():
 
 
 # --------------------------------------------------------------------------------------------- the pipeline
-CONFIG = """name: {name}
-flights:
-  - file: flights.csv
-markers:
-  "0": [0.100, 0.000, -0.015]
-  "1": [-0.0308, 0.0846, -0.015]
-  "2": [-0.0707, -0.0778, -0.015]
-{extra}
-"""
 
 
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory):
     """Two short synthetic flights; flight b's rows carry a sigma_m column (flight a's are empty)."""
     from bayes_disc.observation.markers import write_marker_csv
-    from bayes_disc.observation.synth import write_synth
     d = tmp_path_factory.mktemp("noise")
-    flights = (LaunchSpec(name="a", speed=12.0, launch_angle_deg=4, alpha_deg=8, spin=55, duration=0.25,
-                          noise_mm=1.5, dropout=0.05),
-               LaunchSpec(name="b", speed=10.0, launch_angle_deg=8, alpha_deg=14, spin=-50, duration=0.25,
-                          noise_mm=2.5, dropout=0.0))
-    write_synth(synthesize(SynthSpec(name="s", flights=flights, seed=4)), d / "flights.csv", d / "truth.json")
+    write_two_flights(d, 0.25)
     table = read_marker_csv(d / "flights.csv")
     table.extra["sigma_m"] = np.where(table.flight == "b", np.linspace(1e-3, 4e-3, len(table)), np.nan)
     write_marker_csv(d / "flights.csv", table)
@@ -328,7 +316,7 @@ def folder(tmp_path_factory):
 def _config(folder, name, extra):
     from bayes_disc.inference.model.config import load_config
     path = folder / f"{name}.yaml"
-    path.write_text(CONFIG.format(name=name, extra=extra))
+    path.write_text(run_config(name, extra))
     return load_config(path)
 
 
@@ -509,7 +497,7 @@ def test_sample_with_robust_and_ar1_noise_writes_the_flags(tmp_path, monkeypatch
     m = {str(table.marker[r]): r for r in frame}
     table.xyz[[m["0"], m["1"]]] = table.xyz[[m["1"], m["0"]]]
     write_marker_csv(tmp_path / "flights.csv", table)
-    (tmp_path / "config.yaml").write_text(CONFIG.format(name="rob", extra=(
+    (tmp_path / "config.yaml").write_text(run_config("rob", (
         "output: out\nnoise: {model: robust}\nflight_options: {b: {noise: {model: ar1}}}\n"
         "sampler: {ensembles: 2, max_steps: 30, adapt_steps: 10, check_every: 10, min_steps: 10, seed: 5}\n"
         "least_squares: {starts: 1}")))
@@ -581,7 +569,7 @@ def test_four_flights_with_outliers_and_swaps_sampled_inside_the_clean_intervals
         swaps.append((name, float(t)))
     write_marker_csv(tmp_path / "defects" / "flights.csv", table)
     for d, model in (("clean", "gaussian"), ("defects", "robust")):
-        (tmp_path / d / "config.yaml").write_text(CONFIG.format(name=d, extra=(
+        (tmp_path / d / "config.yaml").write_text(run_config(d, (
             f"output: out\nnoise: {{model: {model}}}\nsampler: {{seed: 3, max_steps: 1500}}")))
         assert main(["sample", str(tmp_path / d / "config.yaml"), "--no-progress"]) == 0
     clean_s = json.loads((tmp_path / "clean" / "out" / "summary.json").read_text())

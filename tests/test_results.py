@@ -22,37 +22,23 @@ from bayes_disc.inference.results.draws import ensemble_view, posterior_draws
 from bayes_disc.inference.results.posterior_file import load_posterior, write_posterior, writing_posterior
 from bayes_disc.inference.sampling.chains import Chains
 from bayes_disc.inference.model.truth import truth_theta
-from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
 
-CONFIG = """name: {name}
-flights:
-  - file: flights.csv
-markers:
-  "0": [0.100, 0.000, -0.015]
-  "1": [-0.0308, 0.0846, -0.015]
-  "2": [-0.0707, -0.0778, -0.015]
-prior: potts_crowther
-output: out_{name}
-{extra}
-"""
+from conftest import run_config, write_two_flights
+
 N_ENS, N_STEPS, N_W = 2, 12, 6
 
 
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory):
     d = tmp_path_factory.mktemp("results")
-    flights = (LaunchSpec(name="a", speed=12.0, launch_angle_deg=4, alpha_deg=8, spin=55, duration=0.3,
-                          noise_mm=1.5, dropout=0.05),
-               LaunchSpec(name="b", speed=10.0, launch_angle_deg=8, alpha_deg=14, spin=-50, duration=0.3,
-                          noise_mm=2.5, dropout=0.0))
-    write_synth(synthesize(SynthSpec(name="s", flights=flights, seed=4)), d / "flights.csv", d / "truth.json")
+    write_two_flights(d, 0.3)
     return d
 
 
 def _run(folder: Path, name: str, extra: str = "", seed: int = 0):
     """(problem, chains, idata, summary) of a short fake run around the truth, written to out_<name>/."""
     cfg_path = folder / f"{name}.yaml"
-    cfg_path.write_text(CONFIG.format(name=name, extra=extra))
+    cfg_path.write_text(run_config(name, "prior: potts_crowther", f"output: out_{name}", extra))
     problem = build_problem(load_config(cfg_path))
     rng = np.random.default_rng(seed)
     theta0 = truth_theta(problem, json.loads((folder / "truth.json").read_text()))

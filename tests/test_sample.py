@@ -10,14 +10,7 @@ import pytest
 from bayes_disc.cli import main
 from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
 
-from conftest import REPO, keep_flights
-
-MARKERS_YAML = """markers:
-  "0": [0.100, 0.000, -0.015]
-  "1": [-0.0308, 0.0846, -0.015]
-  "2": [-0.0707, -0.0778, -0.015]
-"""
-
+from conftest import MARKERS_YAML, REPO, keep_flights
 
 @pytest.fixture(autouse=True)
 def _in_tmp(tmp_path, monkeypatch):
