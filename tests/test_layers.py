@@ -12,11 +12,13 @@ Layers, lowest first:
 2. ``observation`` and ``video`` — recorded data: marker files, cases, synthetic flights, configuration
    blocks; ``video`` turns footage into marker tracks (docs/data-formats.md), so it is an observation module and may
    import only physics and observation;
-3. ``inference`` — the statistical problem, least squares, sampling;
+3. ``inference`` — the statistical problem (``inference.model``), least squares and profiles
+   (``inference.fitting``), sampling (``inference.sampling``) and results (``inference.results``); its
+   sub-packages form one layer;
 4. ``diagnostics`` — identifiability and missing physics (they refit, so they use inference);
 5. ``report`` — HTML report and figures of a run;
-6. the top level — ``cli``, ``api``, ``pipeline``, ``calibration`` (a package), ``_logging``, the package ``__init__`` and
-   ``__main__``: orchestration (run, then report) and the user interfaces.
+6. the top level — ``cli``, ``api``, ``pipeline``, the packages ``jobs`` and ``calibration``, ``_logging``, the
+   package ``__init__`` and ``__main__``: orchestration (run, then report) and the user interfaces.
 
 Imports within one layer (and between ``observation`` and ``video``) are allowed.
 """
@@ -33,7 +35,7 @@ PACKAGE = "bayes_disc"
 LAYER_OF_PART = {"_version": 0, "physics": 1, "observation": 2, "video": 2, "inference": 3, "diagnostics": 4,
                  "report": 5}
 TOP = 6
-TOP_MODULES = {"cli", "api", "pipeline", "calibration", "_logging", "__init__", "__main__"}
+TOP_MODULES = {"cli", "api", "pipeline", "jobs", "calibration", "_logging", "__init__", "__main__"}
 
 
 def module_name(root: Path, file: Path) -> str:

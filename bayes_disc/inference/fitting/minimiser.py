@@ -52,6 +52,8 @@ def minimise(problem: Problem, x0: np.ndarray, sigma: np.ndarray, free: np.ndarr
     every step costs one Jacobian (one batched simulation per flight) and a Schur solve, both linear in the
     number of flights.
 
+    Long: one Levenberg–Marquardt loop whose stopping rules share its state (x, μ, ν, the last Jacobian).
+
     Damping: (H + μ diag H) δ = −g, μ starting at ``mu0`` and updated by Nielsen's rule (× max(1/3,
     1 − (2ρ − 1)³) after a step with gain ratio ρ > 0; × ν, ν doubling, after a rejected one). With
     ``line_search``, where the cost at the full step shows the quadratic model mis-scaled along it, the cost

@@ -212,6 +212,8 @@ def load_config(path, output_override=None) -> RunConfig:
 def config_from_mapping(data: dict, path, output_override=None) -> RunConfig:
     """Validate a configuration already read into a mapping (same keys and rules as CONFIG.yaml).
 
+    Long: one validation pass over the top-level keys, in the order their errors are reported.
+
     Parameters
     ----------
     data : dict

@@ -165,6 +165,9 @@ def build_inference_data(problem: Problem, chains: Chains, rng: np.random.Genera
                          n_log_likelihood: int = N_LOG_LIKELIHOOD_DRAWS, n_predictive: int = N_PREDICTIVE_DRAWS):
     """posterior.nc of a run (layout in this module's docstring).
 
+    Long: one pass over the groups in the order they draw from ``rng`` (prior, predictive noise), which fixes
+    the file's numbers.
+
     Parameters
     ----------
     problem : Problem

@@ -175,8 +175,8 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
                 resume: bool = False, progress: bool = True) -> Chains:
     """Run (or resume) the ensembles until converged or the cap; returns the post-burn-in chains.
 
-    The rounds of sampling, warm-up adaptations and convergence checks in one loop (≈ 80 lines): the
-    pool is rebuilt after each adaptation, so the loop's state is shared by its branches.
+    Long: the rounds of sampling, warm-up adaptations and convergence checks are one loop whose state its
+    branches share (the pool is rebuilt after each adaptation).
 
     Parameters
     ----------
