@@ -37,7 +37,8 @@ def _cmd_simulate(args) -> int:
 
 
 def _cmd_synth(args) -> int:
-    from .observation.synth import load_synth_spec, synthesize, write_synth
+    from .observation.synth_config import load_synth_spec
+    from .observation.synth import synthesize, write_synth
     spec, markers_path, truth_path = load_synth_spec(args.config)
     result = synthesize(spec)
     write_synth(result, markers_path, truth_path)

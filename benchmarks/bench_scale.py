@@ -48,7 +48,8 @@ from bayes_disc.inference.fitting.residuals import whitened_jacobian, whitened_r
 from bayes_disc.inference.run import posterior_approximation  # noqa: E402
 from bayes_disc.inference.sampling.mixing import n_walkers
 from bayes_disc.inference.sampling.sampler import run_sampler  # noqa: E402
-from bayes_disc.observation.synth import load_synth_spec, synthesize, write_synth  # noqa: E402
+from bayes_disc.observation.synth_config import load_synth_spec
+from bayes_disc.observation.synth import synthesize, write_synth  # noqa: E402
 
 DEMO = ROOT / "runs" / "demo"
 

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from bayes_disc.observation.config_io import ConfigError
-from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synth_spec_from_mapping, synthesize
+from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize
+from bayes_disc.observation.synth_config import synth_spec_from_mapping
 from bayes_disc.physics import TERMS, get_terms, literature_coefficients, simulate
 from bayes_disc.physics.nature import FAMILY, NATURE, get_nature
 from bayes_disc.physics.windtunnel import load_wind_tunnel, wind_tunnel_shape

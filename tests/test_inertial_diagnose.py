@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 
 from bayes_disc.diagnostics.diagnosis import rms_text
-from bayes_disc.diagnostics.missing_physics import (CANDIDATES, ModelFit, applicable_candidates, diagnose,
-                                                     model_fit, onset_unavailable, structured, term_signature)
+from bayes_disc.diagnostics.missing_physics import (CANDIDATES, ModelFit, applicable_candidates, diagnose, model_fit,
+                                                    structured)
+from bayes_disc.diagnostics.mismatch import onset_unavailable, term_signature
 from bayes_disc.diagnostics.residuals import flight_residuals, localise, peak_window
 from bayes_disc.inference.model.inertial import InertialThrow, level_start, own_start, search_starts
 from bayes_disc.inference.fitting.leastsq import LeastSquaresResult, fit_least_squares, noise_text

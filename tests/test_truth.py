@@ -5,7 +5,8 @@ from bayes_disc.inference.fitting.residuals import flight_residuals
 from bayes_disc.inference.model.problem import Problem
 from bayes_disc.inference.model.truth import truth_theta
 from bayes_disc.observation.models import MarkerPositions
-from bayes_disc.observation.synth import Defects, LaunchSpec, SynthSpec, synthesize
+from bayes_disc.observation.synth_defects import Defects
+from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize
 from bayes_disc.physics import Disc, Environment
 from bayes_disc.inference.model.initial import initial_state_from_data
 

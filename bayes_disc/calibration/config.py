@@ -32,7 +32,8 @@ import numpy as np
 
 from ..inference.model.config import config_from_mapping
 from ..observation.config_io import ConfigError, Section, load_yaml
-from ..observation.synth import SynthSpec, load_synth_spec, synth_spec_from_mapping
+from ..observation.synth import SynthSpec
+from ..observation.synth_config import load_synth_spec, synth_spec_from_mapping
 from ..physics import COEFFICIENT_NAMES, LITERATURE, literature_coefficients
 
 #: run-configuration keys a campaign sets itself (from the template and the replicate)

@@ -52,8 +52,9 @@ from ..physics import COEFFICIENT_NAMES
 from ..physics.discrepancy import coefficient_curve
 from .discrepancy import Z_KEEP, LearnedDiscrepancy, family_of, learn_discrepancy
 from .missing_physics import (CANDIDATES, EVIDENCE_THRESHOLD, SHARE_PARTIAL, Diagnosis, ModelFit,
-                              applicable_candidates, describe_where, diagnose, fingerprint, model_fit, structured)
-from .missing_physics import SERIES_WORDS, onset_of_mismatch, onset_unavailable
+                              applicable_candidates, diagnose, model_fit, structured)
+from .mismatch import describe_where, fingerprint
+from .mismatch import SERIES_WORDS, onset_of_mismatch, onset_unavailable
 from .residuals import noise_floor, peak_window
 
 logger = logging.getLogger(__name__)
