@@ -2,7 +2,7 @@
 
 ``bd.sample(config)``, ``bd.identifiability(config)`` and ``bd.diagnose(config)`` run the same jobs as the
 command line and return result objects; ``bd.load(run_dir)`` reads a sampled run back from disk. A
-``config`` is a CONFIG.yaml path, a :class:`~.inference.config.RunConfig`, or a dict with the keys of
+``config`` is a CONFIG.yaml path, a :class:`~.inference.model.config.RunConfig`, or a dict with the keys of
 CONFIG.yaml (docs/configuration.md) whose flights may be given in memory::
 
     {"name": "demo", "markers": {...}, "flights": [{"data": dataframe}], ...}
@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING
 from .jobs.results import DiagnosisResult, IdentifiabilityResult, RunResult, SampleResult
 
 if TYPE_CHECKING:                                  # imported lazily at run time: `import bayes_disc` stays light
-    from .inference.config import RunConfig
+    from .inference.model.config import RunConfig
 
 logger = logging.getLogger(__name__)
 
@@ -59,7 +59,7 @@ def _is_table(x) -> bool:
 
 
 def _config_from_dict(config: Mapping, output, base_dir) -> RunConfig:
-    from .inference.config import config_from_mapping, load_config
+    from .inference.model.config import config_from_mapping, load_config
     from .observation.config_io import ConfigError
     from .observation.markers import write_marker_csv
     from .observation.tables import marker_table_from_columns
@@ -141,7 +141,7 @@ def run_config(config, *, output=None, base_dir=None) -> RunConfig:
     TypeError
         For a ``config`` of another type.
     """
-    from .inference.config import RunConfig, load_config
+    from .inference.model.config import RunConfig, load_config
     if isinstance(config, RunConfig):
         return config if output is None else replace(config, output=Path(output))
     if isinstance(config, (str, os.PathLike)):
@@ -307,7 +307,7 @@ def compare(run_dirs):
         If fewer than two runs are given, a run has no pointwise log-likelihood, or the runs' observed
         marker points differ.
     """
-    from .inference.results import compare_runs
+    from .inference.results.compare import compare_runs
 
     def folder(run):
         return run.output if isinstance(run, RunResult) else run

@@ -37,7 +37,8 @@ def _cmd_simulate(args) -> int:
 
 
 def _cmd_synth(args) -> int:
-    from .observation.synth import load_synth_spec, synthesize, write_synth
+    from .observation.synth_config import load_synth_spec
+    from .observation.synth import synthesize, write_synth
     spec, markers_path, truth_path = load_synth_spec(args.config)
     result = synthesize(spec)
     write_synth(result, markers_path, truth_path)
@@ -61,7 +62,7 @@ def _cmd_demo(args) -> int:
 def _run_config(args, job: str):
     """The run configuration of ``args.config`` with ``--output``, refused when its folder already holds
     ``job``'s results and neither ``--overwrite`` nor ``--resume`` was given."""
-    from .inference.config import load_config
+    from .inference.model.config import load_config
     from .jobs.outputs import check_fresh_output
     cfg = load_config(args.config, output_override=args.output)
     check_fresh_output(cfg, job, overwrite=args.overwrite, resume=getattr(args, "resume", False))
@@ -116,7 +117,7 @@ def _cmd_calibrate(args) -> int:
 def _cmd_compare(args) -> int:
     import json
     from .api import compare
-    from .inference.results import run_label
+    from .inference.results.compare import run_label
     try:
         table = compare(args.run_dirs)
     except (ValueError, FileNotFoundError) as e:

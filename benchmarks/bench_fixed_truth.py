@@ -28,9 +28,9 @@ sys.path.insert(0, str(ROOT))
 from bayes_disc.calibration.config import load_cal_config  # noqa: E402
 from bayes_disc.calibration.replicate import (draw_truth, jittered_flights, replicate_data,  # noqa: E402
                                               replicate_rng, replicate_run)
-from bayes_disc.inference.config import config_from_mapping  # noqa: E402
-from bayes_disc.inference.data import build_problem  # noqa: E402
-from bayes_disc.inference.leastsq import fit_least_squares, refine_least_squares  # noqa: E402
+from bayes_disc.inference.model.config import config_from_mapping  # noqa: E402
+from bayes_disc.inference.model.data import build_problem  # noqa: E402
+from bayes_disc.inference.fitting.leastsq import fit_least_squares, refine_least_squares  # noqa: E402
 from bayes_disc.observation.synth import synthesize, write_synth  # noqa: E402
 from bayes_disc.physics import Coefficients  # noqa: E402
 

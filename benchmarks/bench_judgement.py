@@ -26,11 +26,11 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bayes_disc.inference.config import load_config  # noqa: E402
-from bayes_disc.inference.data import build_problem  # noqa: E402
-from bayes_disc.inference.robust import average_over_judgement, with_saved_flags  # noqa: E402
+from bayes_disc.inference.model.config import load_config  # noqa: E402
+from bayes_disc.inference.model.data import build_problem  # noqa: E402
+from bayes_disc.inference.fitting.robust import average_over_judgement, with_saved_flags  # noqa: E402
 from bayes_disc.jobs.sample import run_sample  # noqa: E402
-from bayes_disc.inference.sampler import _read, chain_paths  # noqa: E402
+from bayes_disc.inference.sampling.chains import _read, chain_paths  # noqa: E402
 from bayes_disc.observation.markers import read_marker_csv, write_marker_csv  # noqa: E402
 from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth  # noqa: E402
 

@@ -51,8 +51,9 @@ sys.path.insert(0, str(ROOT))
 from bayes_disc.calibration.config import load_cal_config  # noqa: E402
 from bayes_disc.calibration.replicate import replicate_problem  # noqa: E402
 from bayes_disc.calibration.stats import LEVELS  # noqa: E402
-from bayes_disc.inference.leastsq import _steps, jacobian_blocks, refine_least_squares, whitened_residuals, _rms  # noqa: E402
-from bayes_disc.inference.truth import truth_theta  # noqa: E402
+from bayes_disc.inference.fitting.residuals import _steps, jacobian_blocks, whitened_residuals
+from bayes_disc.inference.fitting.leastsq import refine_least_squares, _rms  # noqa: E402
+from bayes_disc.inference.model.truth import truth_theta  # noqa: E402
 
 
 def at_truth(problem, theta: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:

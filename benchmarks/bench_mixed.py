@@ -25,11 +25,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bayes_disc.inference.config import load_config  # noqa: E402
-from bayes_disc.inference.data import build_problem  # noqa: E402
-from bayes_disc.inference.leastsq import refine_least_squares  # noqa: E402
-from bayes_disc.inference.truth import truth_theta  # noqa: E402
-from bayes_disc.observation.synth import load_synth_spec, synthesize, write_synth  # noqa: E402
+from bayes_disc.inference.model.config import load_config  # noqa: E402
+from bayes_disc.inference.model.data import build_problem  # noqa: E402
+from bayes_disc.inference.fitting.leastsq import refine_least_squares  # noqa: E402
+from bayes_disc.inference.model.truth import truth_theta  # noqa: E402
+from bayes_disc.observation.synth_config import load_synth_spec
+from bayes_disc.observation.synth import synthesize, write_synth  # noqa: E402
 from bayes_disc.physics import COEFFICIENT_NAMES  # noqa: E402
 
 RATE_COEFFICIENTS = ("CMq", "CRp", "CRr", "CNr")

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import shutil
 import sys
 import tempfile
 import time
@@ -21,10 +20,10 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bayes_disc.inference.config import load_config  # noqa: E402
-from bayes_disc.inference.data import build_problem  # noqa: E402
+from bayes_disc.inference.model.config import load_config  # noqa: E402
+from bayes_disc.inference.model.data import build_problem  # noqa: E402
 from bayes_disc.jobs.sample import run_sample  # noqa: E402
-from bayes_disc.inference.sampler import n_walkers  # noqa: E402
+from bayes_disc.inference.sampling.mixing import n_walkers  # noqa: E402
 
 
 def logprob_time(cfg, repeats: int = 15) -> tuple[float, int]:

@@ -41,12 +41,15 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bayes_disc.inference.config import load_config  # noqa: E402
-from bayes_disc.inference.data import build_problem  # noqa: E402
-from bayes_disc.inference.leastsq import fit_least_squares, whitened_jacobian, whitened_residuals  # noqa: E402
+from bayes_disc.inference.model.config import load_config  # noqa: E402
+from bayes_disc.inference.model.data import build_problem  # noqa: E402
+from bayes_disc.inference.fitting.leastsq import fit_least_squares
+from bayes_disc.inference.fitting.residuals import whitened_jacobian, whitened_residuals  # noqa: E402
 from bayes_disc.jobs.sample import posterior_approximation  # noqa: E402
-from bayes_disc.inference.sampler import n_walkers, run_sampler  # noqa: E402
-from bayes_disc.observation.synth import load_synth_spec, synthesize, write_synth  # noqa: E402
+from bayes_disc.inference.sampling.mixing import n_walkers
+from bayes_disc.inference.sampling.sampler import run_sampler  # noqa: E402
+from bayes_disc.observation.synth_config import load_synth_spec
+from bayes_disc.observation.synth import synthesize, write_synth  # noqa: E402
 
 DEMO = ROOT / "runs" / "demo"
 
@@ -109,7 +112,7 @@ def one_case(n: int, seed: int, sampler: str, dense: bool, tmp: Path) -> dict:
     row["least_squares_s"] = time.perf_counter() - t0
     row["least_squares_cost"] = ls.cost
     if dense:
-        from bayes_disc.inference.leastsq import minimise
+        from bayes_disc.inference.fitting.minimiser import minimise
         x0 = problem.start_vector()
         t0 = time.perf_counter()
         new = minimise(problem, x0, problem.nominal_noise, max_nfev=cfg.least_squares.max_nfev)

@@ -9,6 +9,40 @@ SHARED = REPO.parent / "shared"
 REFERENCE_DIR = SHARED / "reference"
 REFERENCE_MISSING = "../shared/reference not found beside the checkout: CI provides it"
 
+#: the demo disc's three markers in the body frame [m] (as in runs/demo/config.yaml)
+MARKERS = {"0": [0.100, 0.000, -0.015], "1": [-0.0308, 0.0846, -0.015], "2": [-0.0707, -0.0778, -0.015]}
+#: the ``markers:`` block of a run configuration with :data:`MARKERS`
+MARKERS_YAML = """markers:
+  "0": [0.100, 0.000, -0.015]
+  "1": [-0.0308, 0.0846, -0.015]
+  "2": [-0.0707, -0.0778, -0.015]
+"""
+
+
+def run_config(name: str, *lines: str) -> str:
+    """A run configuration (YAML text): ``name``, the marker file ``flights.csv`` beside it, :data:`MARKERS`,
+    then ``lines`` (one key each, e.g. ``"output: out"``)."""
+    return f"name: {name}\nflights:\n  - file: flights.csv\n{MARKERS_YAML}" + "".join(f"{line}\n" for line in lines)
+
+
+def write_short_flight(folder: Path) -> None:
+    """One synthetic 0.5-s flight ``short`` (seed 3): ``flights.csv`` and ``truth.json`` in ``folder``."""
+    from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
+    f = LaunchSpec(name="short", speed=12.0, launch_angle_deg=4, alpha_deg=8, spin=55, duration=0.5,
+                   noise_mm=1.5, dropout=0.02)
+    write_synth(synthesize(SynthSpec(name="s", flights=(f,), seed=3)), folder / "flights.csv", folder / "truth.json")
+
+
+def write_two_flights(folder: Path, duration: float) -> None:
+    """Two synthetic flights ``a`` and ``b`` of ``duration`` seconds (seed 4, 1.5 and 2.5 mm noise):
+    ``flights.csv`` and ``truth.json`` in ``folder``."""
+    from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
+    flights = (LaunchSpec(name="a", speed=12.0, launch_angle_deg=4, alpha_deg=8, spin=55, duration=duration,
+                          noise_mm=1.5, dropout=0.05),
+               LaunchSpec(name="b", speed=10.0, launch_angle_deg=8, alpha_deg=14, spin=-50, duration=duration,
+                          noise_mm=2.5, dropout=0.0))
+    write_synth(synthesize(SynthSpec(name="s", flights=flights, seed=4)), folder / "flights.csv", folder / "truth.json")
+
 
 def in_ci(environ=None) -> bool:
     """True when the environment says this is a CI run (``CI=true``, as CI services and ``.ci/run`` set it)."""

@@ -15,10 +15,9 @@ from bayes_disc.observation.config_io import ConfigError
 from bayes_disc.observation.markers import MarkerFileError, load_flights, read_marker_csv
 from bayes_disc.observation.tables import flights_from_columns, marker_table_from_columns
 
-from conftest import REPO
+from conftest import MARKERS, REPO
 
 DEMO = REPO / "runs/demo"
-MARKERS = {"0": [0.100, 0.000, -0.015], "1": [-0.0308, 0.0846, -0.015], "2": [-0.0707, -0.0778, -0.015]}
 SMALL = {"sampler": {"ensembles": 2, "max_steps": 45, "adapt_steps": 15, "check_every": 15, "min_steps": 10,
                      "seed": 5},
          "least_squares": {"starts": 1},

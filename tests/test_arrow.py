@@ -1,17 +1,19 @@
-"""Block-arrow normal equations (bayes_disc.inference.arrow) and the Levenberg–Marquardt minimiser built on
-them (issue 18): the structured solves against dense linear algebra, and the new solver's optimum and
+"""Block-arrow normal equations (bayes_disc.inference.fitting.arrow) and the Levenberg–Marquardt minimiser built on
+them: the structured solves against dense linear algebra, and the new solver's optimum and
 covariance against scipy's dense trust-region fit on a small problem."""
 import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from bayes_disc.inference.arrow import ArrowJacobian
-from bayes_disc.inference.initial import initial_state_from_data
-from bayes_disc.inference import profile
-from bayes_disc.inference.leastsq import (FAILED_RESIDUAL, MU_NEAR, START_DECREMENT, covariance_from_jacobian,
-                                          decrement, jacobian_blocks, minimise, refine_least_squares,
-                                          whitened_costs, whitened_jacobian, whitened_residuals, _rms)
-from bayes_disc.inference.model import Problem
+from bayes_disc.inference.fitting.arrow import ArrowJacobian
+from bayes_disc.inference.model.initial import initial_state_from_data
+from bayes_disc.inference.fitting import profile
+from bayes_disc.inference.fitting.residuals import (FAILED_RESIDUAL, jacobian_blocks, whitened_costs,
+                                                    whitened_jacobian, whitened_residuals)
+from bayes_disc.inference.fitting.minimiser import MU_NEAR, decrement, minimise
+from bayes_disc.inference.fitting.leastsq import START_DECREMENT, refine_least_squares, _rms
+from bayes_disc.inference.fitting.covariance import covariance_from_jacobian
+from bayes_disc.inference.model.problem import Problem
 from bayes_disc.observation.synth import DEFAULT_MARKERS, LaunchSpec, SynthSpec, synthesize
 
 

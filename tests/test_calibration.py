@@ -1,7 +1,6 @@
 """Simulation-based calibration: the rank/coverage statistics, CAL.yaml validation, a campaign on Dask."""
 import json
 import re
-import textwrap
 
 from pathlib import Path
 from types import SimpleNamespace
@@ -162,14 +161,14 @@ def test_good_cal_yaml_reads(tmp_path):
 def test_truths_drawn_from_an_around_prior_are_the_fits_prior():
     """Exact SBC: with ``truth.draw: prior`` the campaign draws from the prior the fit will use, also when
     that prior is an ``around`` prior given under ``run.prior``; the shipped four_flights_white campaign is of this kind."""
-    from bayes_disc.inference.priors import coefficient_prior
+    from bayes_disc.inference.model.priors import coefficient_prior
     from bayes_disc.physics import literature_coefficients
     cal = load_cal_config(Path(__file__).parents[1] / "runs/calibration/four_flights_white.yaml")
     assert cal.truth.draw == "prior"
     hh = literature_coefficients("hummel2002").as_dict()
     assert cal.truth.values == pytest.approx(hh)
     assert cal.truth.sd == pytest.approx({k: 0.1 * abs(v) for k, v in hh.items()})
-    from bayes_disc.inference.config import config_from_mapping
+    from bayes_disc.inference.model.config import config_from_mapping
     run = config_from_mapping({**cal.run, "name": "r", "flights": [{"file": "four_flights_white.yaml"}],
                                "markers": {"0": [0.1, 0, 0], "1": [0, 0.1, 0], "2": [-0.1, 0, 0]}},
                               Path(__file__).parents[1] / "runs/calibration/four_flights_white.yaml")
@@ -178,7 +177,7 @@ def test_truths_drawn_from_an_around_prior_are_the_fits_prior():
 
 # ------------------------------------------------------------------------------- a campaign on Dask
 def test_tiny_campaign_on_two_workers_resumes_without_redoing(tmp_path, capsys):
-    """Two replicates, then three with replicate 0 deleted: only 0 and 2 run again; SPEC §6 keys."""
+    """Two replicates, then three with replicate 0 deleted: only 0 and 2 run again; the keys of docs/outputs.md."""
     p = tmp_path / "cal.yaml"
     p.write_text(TINY.format(n=2))
     assert main(["calibrate", str(p), "--workers", "2", "--no-progress"]) == 0
@@ -291,11 +290,11 @@ def test_a_campaign_recorded_before_the_template_had_nature_still_resumes(tmp_pa
 
 def test_replicate_problem_is_what_the_replicates_fit_builds():
     """The problem of a campaign replicate, for checks that do not sample: the campaign's run settings (AR(1)
-    noise, two least-squares starts), the replicate's flights and truth; at θ̃ (bayes_disc.inference.truth)
+    noise, two least-squares starts), the replicate's flights and truth; at θ̃ (bayes_disc.inference.model.truth)
     the effective residuals over σ have mean square 1 − ρ² (the innovations, scaled by |W|^(−1/n))."""
     from bayes_disc.calibration.replicate import replicate_data, replicate_problem
-    from bayes_disc.inference.leastsq import flight_residuals
-    from bayes_disc.inference.truth import truth_theta
+    from bayes_disc.inference.fitting.residuals import flight_residuals
+    from bayes_disc.inference.model.truth import truth_theta
     repo = Path(__file__).resolve().parents[1]
     cal = load_cal_config(repo / "runs/calibration/four_flights_ar1.yaml")
     problem, cfg, result, truth = replicate_problem(cal, 3)

@@ -1,15 +1,16 @@
-"""Least squares on many flights (issue 18): starts fitted on the most informative flights, the others joined
+"""Least squares on many flights: starts fitted on the most informative flights, the others joined
 to the best start, and the step-length correction of fits started next to an optimum
-(bayes_disc.inference.leastsq: informative_flights, join_flights, step_length)."""
+(bayes_disc.inference.fitting.leastsq: informative_flights, join_flights; .minimiser: step_length)."""
 import numpy as np
 import pytest
 
-from bayes_disc.inference import leastsq
-from bayes_disc.inference.arrow import ArrowJacobian
-from bayes_disc.inference.initial import initial_state_from_data
-from bayes_disc.inference.leastsq import (MU_NEAR, REFINE_DECREMENT, fit_least_squares, informative_flights,
-                                          minimise, step_length, _rms)
-from bayes_disc.inference.model import Problem
+from bayes_disc.inference.fitting import leastsq
+from bayes_disc.inference.fitting.arrow import ArrowJacobian
+from bayes_disc.inference.model.initial import initial_state_from_data
+from bayes_disc.inference.fitting.minimiser import MU_NEAR, STEP_LENGTH_BOUNDS, minimise, step_length
+from bayes_disc.inference.fitting.residuals import jacobian_blocks
+from bayes_disc.inference.fitting.leastsq import REFINE_DECREMENT, fit_least_squares, informative_flights, _rms
+from bayes_disc.inference.model.problem import Problem
 from bayes_disc.observation.synth import DEFAULT_MARKERS, LaunchSpec, SynthSpec, synthesize
 
 
@@ -71,7 +72,7 @@ def test_step_length_is_the_minimum_of_the_parabola(curvature_ratio):
     f = lambda a: f0 + a * slope + 0.5 * curvature_ratio * a * a * (-slope)  # noqa: E731
     assert step_length(f0, f(1.0), slope) == pytest.approx(1.0 / curvature_ratio)
     assert step_length(f0, f0 + slope + 0.5 * 1.1 * (-slope), slope) is None
-    assert step_length(f0, f0 + 1.2 * slope, slope) == leastsq.STEP_LENGTH_BOUNDS[1]
+    assert step_length(f0, f0 + 1.2 * slope, slope) == STEP_LENGTH_BOUNDS[1]
     assert step_length(f0, f0 - 1.0, +1.0) is None                  # not a descent step
 
 
@@ -86,7 +87,7 @@ def test_step_length_corrections_reach_the_same_optimum(six_flights):
                          line_search=True)
     assert plain.status > 0 and corrected.status > 0
     assert abs(plain.cost - corrected.cost) < 20 * REFINE_DECREMENT
-    cov = leastsq.jacobian_blocks(plain.x, p, sigma).information().inverse()
+    cov = jacobian_blocks(plain.x, p, sigma).information().inverse()
     assert np.max(np.abs(plain.x - corrected.x) / np.sqrt(np.diag(cov))) < 0.02
 
 

@@ -1,11 +1,11 @@
-"""The sampler's chain store (bayes_disc.inference.backend): a round of steps written at once gives the file
+"""The sampler's chain store (bayes_disc.inference.sampling.backend): a round of steps written at once gives the file
 emcee's own backend writes step by step."""
 import emcee
 import h5py
 import numpy as np
 import pytest
 
-from bayes_disc.inference.backend import RoundBackend
+from bayes_disc.inference.sampling.backend import RoundBackend
 
 NW, DIM, G = 12, 3, 2
 

@@ -1,12 +1,14 @@
-"""Correlated noise is not missing physics: `diagnose` tells them apart (issue 16)."""
+"""Correlated noise is not missing physics: `diagnose` tells them apart."""
 import json
 from dataclasses import replace
 
 from bayes_disc.cli import main
 from bayes_disc.diagnostics.residuals import flight_residuals, ljung_box
-from bayes_disc.observation.synth import Defects, LaunchSpec, SynthSpec, synthesize, write_synth
+from bayes_disc.observation.synth_defects import Defects
+from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
 
-from test_noise import CONFIG, _fit, _problem, clean, with_ar1_noise  # noqa: F401 (clean: a fixture)
+from conftest import run_config
+from test_noise import _fit, _problem, clean, with_ar1_noise  # noqa: F401 (clean: a fixture)
 
 
 def test_residual_series_of_ar1_noise_are_its_innovations(clean):
@@ -34,7 +36,7 @@ def test_diagnose_says_noise_correlated_not_missing_physics(tmp_path, monkeypatc
                           noise_mm=1.5, defects=ar))
     write_synth(synthesize(SynthSpec(name="c", flights=flights, seed=21)), tmp_path / "flights.csv",
                 tmp_path / "truth.json")
-    (tmp_path / "config.yaml").write_text(CONFIG.format(name="corr", extra="output: out\nleast_squares: {starts: 1}"))
+    (tmp_path / "config.yaml").write_text(run_config("corr", "output: out\nleast_squares: {starts: 1}"))
     assert main(["diagnose", str(tmp_path / "config.yaml"), "--no-sample", "--processes", "1", "--no-progress"]) == 0
     d = json.loads((tmp_path / "out" / "diagnosis.json").read_text())
     assert d["noise"]["model"] == "ar1" and d["noise"]["evidence"] > 10, d["noise"]
@@ -51,8 +53,8 @@ def _laplace_run(problem, ls, folder, seed: int):
     model is far from linear (and out of the prior's support)."""
     import numpy as np
 
-    from bayes_disc.inference.results import build_inference_data
-    from bayes_disc.inference.sampler import Chains
+    from bayes_disc.inference.results.idata import build_inference_data
+    from bayes_disc.inference.sampling.chains import Chains
     rng = np.random.default_rng(seed)
     n_ens, n_steps, n_w = 2, 40, 8
     flat = rng.multivariate_normal(ls.theta, ls.cov / 100, size=n_ens * n_steps * n_w)

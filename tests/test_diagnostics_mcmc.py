@@ -5,8 +5,7 @@ import arviz as az
 import numpy as np
 import pytest
 
-from bayes_disc.inference.diagnostics_mcmc import (SUMMARY_COLUMNS, bulk_ess, ess_bulk, rank_rhat, rhat_across,
-                                                   summary_diagnostics)
+from bayes_disc.inference.sampling.mcmc_stats import SUMMARY_COLUMNS, ess, rhat, summary_diagnostics
 
 
 def arviz(x: np.ndarray, what: str) -> np.ndarray:
@@ -37,29 +36,30 @@ def test_rank_rhat_and_bulk_ess_equal_arviz(m, n):
     x = chains(6, m, n, m * 1000 + n)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")             # constant parameter: 0/0 in R-hat, as in ArviZ
-        rh = rank_rhat(x)
+        rh = rhat(x)
     np.testing.assert_allclose(rh, arviz(x, "rhat"), rtol=1e-10, equal_nan=True)
-    np.testing.assert_allclose(bulk_ess(x), arviz(x, "ess"), rtol=1e-10, equal_nan=True)
+    np.testing.assert_allclose(ess(x), arviz(x, "ess"), rtol=1e-10, equal_nan=True)
     if m > 1:
         assert rh[1] > 1.05 and np.isnan(rh[3])
-    assert bulk_ess(x)[3] == (n // 2) * 2 * m       # constant: every draw counts
+    assert ess(x)[3] == (n // 2) * 2 * m       # constant: every draw counts
 
 
 def test_non_finite_draws_give_nan_like_arviz():
     x = chains(5, 4, 40, 7)
     x[0, 1, 5] = np.nan
-    assert np.isnan(rank_rhat(x)[0]) and np.isnan(bulk_ess(x)[0])
-    assert np.isfinite(rank_rhat(x)[[1, 2, 4]]).all() and np.isfinite(bulk_ess(x)[1:]).all()
+    assert np.isnan(rhat(x)[0]) and np.isnan(ess(x)[0])
+    assert np.isfinite(rhat(x)[[1, 2, 4]]).all() and np.isfinite(ess(x)[1:]).all()
 
 
 def test_ensemble_layout():
-    """rhat_across: ensembles are chains (walkers pooled step-major); ess_bulk: every walker a chain."""
+    """rhat(layout="ensembles"): ensembles are chains (walkers pooled step-major); ess(layout="walkers"):
+    every walker a chain."""
     rng = np.random.default_rng(3)
     c = rng.standard_normal((3, 20, 8, 2)).cumsum(axis=1) * 0.1 + rng.standard_normal((3, 20, 8, 2))
     pooled = np.moveaxis(c.reshape(3, 160, 2), 2, 0)
     per_walker = np.moveaxis(np.moveaxis(c, 2, 1).reshape(24, 20, 2), 2, 0)
-    np.testing.assert_allclose(rhat_across(c), arviz(pooled, "rhat"), rtol=1e-10)
-    np.testing.assert_allclose(ess_bulk(c), arviz(per_walker, "ess"), rtol=1e-10)
+    np.testing.assert_allclose(rhat(c, layout="ensembles"), arviz(pooled, "rhat"), rtol=1e-10)
+    np.testing.assert_allclose(ess(c, layout="walkers"), arviz(per_walker, "ess"), rtol=1e-10)
 
 
 @pytest.mark.parametrize("m,n", [(4, 10), (4, 301), (16, 64), (1, 50), (3, 5)])
@@ -105,7 +105,7 @@ def sampler_like(n_ens: int, n_steps: int, n_w: int, dim: int, seed: int) -> np.
 def test_run_length_ranks_equal_sorting_every_draw(n_steps, n_w):
     """The ranks found from runs of repeated draws (diagnostics_mcmc._z_and_median) are those of sorting
     every draw, bit for bit, and so are R-hat across ensembles and bulk ESS (even and odd draw counts)."""
-    from bayes_disc.inference import diagnostics_mcmc as dm
+    from bayes_disc.inference.sampling import mcmc_stats as dm
     c = sampler_like(3, n_steps, n_w, 4, n_steps * n_w)
     per_walker = np.moveaxis(np.moveaxis(c, 2, 1).reshape(3 * n_w, n_steps, 4), 2, 0)
     z, median = dm._z_and_median(per_walker)
@@ -113,7 +113,9 @@ def test_run_length_ranks_equal_sorting_every_draw(n_steps, n_w):
     np.testing.assert_array_equal(median, np.median(per_walker.reshape(4, -1), axis=1))
     pooled = dm._split(np.moveaxis(c.reshape(3, n_steps * n_w, 4), 2, 0))
     folded = np.abs(pooled - np.median(pooled.reshape(4, -1), axis=1)[:, None, None])
-    sorted_rhat = np.maximum(dm._rhat(dm._z_scale_sorted(pooled)), dm._rhat(dm._z_scale_sorted(folded)))
-    np.testing.assert_array_equal(rhat_across(c), sorted_rhat)
-    np.testing.assert_array_equal(ess_bulk(c), dm._ess(dm._z_scale_sorted(dm._split(per_walker))))
-    np.testing.assert_allclose(rhat_across(c), arviz(np.moveaxis(c.reshape(3, -1, 4), 2, 0), "rhat"), rtol=1e-10)
+    sorted_rhat = np.maximum(dm._psrf(dm._z_scale_sorted(pooled)), dm._psrf(dm._z_scale_sorted(folded)))
+    np.testing.assert_array_equal(rhat(c, layout="ensembles"), sorted_rhat)
+    np.testing.assert_array_equal(ess(c, layout="walkers"),
+                                  dm._effective_draws(dm._z_scale_sorted(dm._split(per_walker))))
+    np.testing.assert_allclose(rhat(c, layout="ensembles"), arviz(np.moveaxis(c.reshape(3, -1, 4), 2, 0), "rhat"),
+                               rtol=1e-10)

@@ -1,4 +1,4 @@
-"""The learned discrepancy (issue 17): its term, the sparse selection, coefficient curves, held parameters.
+"""The learned discrepancy: its term, the sparse selection, coefficient curves, held parameters.
 
 The end-to-end proof (a concealed ground effect with another decay law learned as a function of height
 whose curve follows the generating one) is the slow test at the end.
@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from bayes_disc.diagnostics.discrepancy import LearnedDiscrepancy, family_of, select_columns
-from bayes_disc.inference.config import load_config
-from bayes_disc.inference.data import build_problem
-from bayes_disc.inference.leastsq import refine_least_squares
+from bayes_disc.inference.model.config import load_config
+from bayes_disc.inference.model.data import build_problem
+from bayes_disc.inference.fitting.leastsq import refine_least_squares
 from bayes_disc.observation.registry import MODEL_EXTENSIONS, split_extensions, unit
 from bayes_disc.physics import Disc, TERMS
 from bayes_disc.physics.discrepancy import (BASE_COLUMNS, COLUMNS, DISCREPANCY, FUNCTIONS, basis, coefficient_curve,

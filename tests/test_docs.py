@@ -1,6 +1,6 @@
 """The user documentation cannot silently go stale.
 
-* Every key the run-configuration reader (``bayes_disc.inference.config.load_config``) accepts appears in
+* Every key the run-configuration reader (``bayes_disc.inference.model.config.load_config``) accepts appears in
   ``docs/configuration.md`` with its default, and every key documented there is accepted.
 * Every relative link between the documentation pages resolves.
 * No ``--help`` text points to the internal specification.
@@ -40,7 +40,7 @@ def _normalise(key: str) -> str:
 
 def accepted_keys(tmp_path: Path) -> dict:
     """{documented key form: default (REQUIRED when required)} of every key ``load_config`` asks for."""
-    from bayes_disc.inference.config import load_config
+    from bayes_disc.inference.model.config import load_config
     (tmp_path / "f.csv").write_text("flight,t,marker,x,y,z\n")
     (tmp_path / "truth.json").write_text("{}")
     (tmp_path / "log.csv").write_text("flight,t,gx,gy,gz,ax,ay,az\n")
@@ -113,7 +113,7 @@ def test_every_accepted_config_key_is_documented_with_its_default(tmp_path):
     keys = accepted_keys(tmp_path)
     rows = documented_rows(CONFIG_DOC.read_text())
     missing = sorted(k for k in leaves(keys) if k not in rows)
-    assert not missing, f"keys accepted by bayes_disc/inference/config.py but not documented in {CONFIG_DOC}: {missing}"
+    assert not missing, f"keys accepted by bayes_disc/inference/model/config.py but not documented in {CONFIG_DOC}: {missing}"
     wrong = {k: (rows[k], keys[k]) for k in leaves(keys)
              if not default_matches(rows[k], keys[k])}
     assert not wrong, f"documented default differs from the code (doc cell, code default): {wrong}"

@@ -1,4 +1,4 @@
-"""Term families and forms of nature (issue 17): effects whose form in nature differs from every formula of
+"""Term families and forms of nature: effects whose form in nature differs from every formula of
 the library.
 
 Fast: each family's shape parameters at their off values give the original formula exactly; each form of
@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 
 from bayes_disc.observation.config_io import ConfigError
-from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synth_spec_from_mapping, synthesize
+from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize
+from bayes_disc.observation.synth_config import synth_spec_from_mapping
 from bayes_disc.physics import TERMS, get_terms, literature_coefficients, simulate
 from bayes_disc.physics.nature import FAMILY, NATURE, get_nature
-from bayes_disc.physics.windtunnel import load_wind_tunnel, wind_tunnel_shape
+from bayes_disc.physics.windtunnel import wind_tunnel_shape
 
 from test_missing_physics import NOISE_MM, diagnose, make_run, pooled_ratio
 
@@ -45,8 +46,8 @@ def _term_flight(term_id, values):
 
 @pytest.mark.parametrize("term_id", sorted(ORIGINAL))
 def test_family_at_off_shape_is_the_original_formula(term_id):
-    """Shape parameters at their off values reproduce the formula of SPEC §2's term; moving one changes the
-    flight."""
+    """Shape parameters at their off values reproduce the formula of the term in docs/conventions.md; moving one
+    changes the flight."""
     term = TERMS[term_id]
     shape = [p for p in term.parameters if p.name not in ORIGINAL[term_id]]
     assert shape, f"{term_id} has no shape parameter"

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from bayes_disc.cli import main
-from bayes_disc.inference.profile import ProfilePath, ProfilePoint
+from bayes_disc.inference.fitting.profile import ProfilePath, ProfilePoint
 
 from conftest import REPO, keep_flights
 
@@ -44,7 +44,7 @@ def test_single_narrow_flight_leaves_alpha_slopes_unidentified(narrow):
     for name in ("CLa", "CDa", "CMa"):
         assert narrow[name]["verdict"] != "identified", (name, narrow[name])
         assert "α spans" in narrow[name]["reason"]
-    # SPEC §6: a verdict and a reason per coefficient
+    # docs/outputs.md: a verdict and a reason per coefficient
     for name in COEFS:
         assert narrow[name]["verdict"] in ("identified", "weak", "unidentified") and narrow[name]["reason"]
     # the weakest direction is named as a combination
@@ -113,10 +113,10 @@ def test_profiles_of_the_demo_are_bounded_and_gaussian_near_the_optimum(tmp_path
     """The profile fits converge inside their budget (a fit stopped by its budget ends its side of the path,
     and a strict relative tolerance once made CL0 and CD0 of the demo's flights 'one-sided' though their
     posteriors are narrow); near the optimum of these well-determined coefficients D ≈ t²."""
-    from bayes_disc.inference.config import load_config
-    from bayes_disc.inference.leastsq import fit_least_squares
-    from bayes_disc.inference.profile import profile_path, profile_paths
-    from bayes_disc.inference.data import build_problem
+    from bayes_disc.inference.model.config import load_config
+    from bayes_disc.inference.fitting.leastsq import fit_least_squares
+    from bayes_disc.inference.fitting.profile import profile_path, profile_paths
+    from bayes_disc.inference.model.data import build_problem
     cfg = load_config(_demo_data(tmp_path))
     problem = build_problem(cfg)
     ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,

@@ -1,4 +1,4 @@
-"""Inertial log readers (SPEC §4b): the four real flatball-ins files, crafted defects, imu-csv."""
+"""Inertial log readers (docs/data-formats.md): the four real flatball-ins files, crafted defects, imu-csv."""
 import math
 from pathlib import Path
 

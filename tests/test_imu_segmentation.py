@@ -53,7 +53,7 @@ def test_each_real_file_one_throw(path):
     assert seg.criteria["impact_found"] and 150 < seg.n_rows < 500
     expected = "upside_down" if path.stem.endswith("rh") else "right_side_up"
     assert seg.orientation == expected
-    # backhand spins with +gyro-z (r > 0, SPEC §1, sensor z like b3), forehand and hammer the other way
+    # backhand spins with +gyro-z (r > 0, docs/conventions.md, sensor z like b3), forehand and hammer the other way
     assert np.sign(seg.criteria["spin_median"]) == (1 if path.stem.endswith("rb") else -1)
     (sub,) = throw_logs(log, segs)
     assert sub.rows[0] == seg.start and sub.rows[-1] == seg.end - 1

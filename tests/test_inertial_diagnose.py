@@ -5,12 +5,13 @@ import numpy as np
 import pytest
 
 from bayes_disc.diagnostics.diagnosis import rms_text
-from bayes_disc.diagnostics.missing_physics import (CANDIDATES, ModelFit, applicable_candidates, diagnose,
-                                                     model_fit, onset_unavailable, structured, term_signature)
-from bayes_disc.diagnostics.residuals import flight_residuals, localise, peak_window
-from bayes_disc.inference.inertial import InertialThrow, level_start, own_start, search_starts
-from bayes_disc.inference.leastsq import LeastSquaresResult, fit_least_squares, noise_text
-from bayes_disc.inference.model import Problem
+from bayes_disc.diagnostics.missing_physics import (CANDIDATES, ModelFit, applicable_candidates, diagnose, model_fit,
+                                                    structured)
+from bayes_disc.diagnostics.mismatch import onset_unavailable, term_signature
+from bayes_disc.diagnostics.residuals import peak_window
+from bayes_disc.inference.model.inertial import InertialThrow, level_start, own_start, search_starts
+from bayes_disc.inference.fitting.leastsq import LeastSquaresResult, fit_least_squares, noise_text
+from bayes_disc.inference.model.problem import Problem
 from bayes_disc.observation.inertial_synth import LoggerSpec, synthetic_log
 from bayes_disc.observation.models.inertial import SERIES, InertialMeasurements
 from bayes_disc.observation.registry import split_extensions
@@ -118,7 +119,7 @@ def test_inertial_residual_series_white_at_the_truth_and_structured_without_the_
     rms = truth.rms
     assert set(rms["a"]) == {"gyro", "acc"} and rms["a"]["acc"]["unit"] == "m/s²"
     assert abs(rms["a"]["acc"]["rms"] / SPEC.acc_noise[0] - 1) < 0.15
-    assert truth.rms_mm == {}                                   # no markers: no SPEC mm entry
+    assert truth.rms_mm == {}                                   # no markers: no mm entry
     assert "gyro" in rms_text(rms) and "m/s²" in rms_text(rms)
     off = theta.copy()
     off[p.layout.index("CY")] = 0.0

@@ -10,8 +10,9 @@ import pytest
 from bayes_disc.cli import main
 from bayes_disc.diagnostics.identifiability import (PRIOR_DOMINATED, RELATIVE_SD, coefficient_information,
                                                     data_description, design_skip_reason, verdicts_from_covariance)
-from bayes_disc.inference.leastsq import covariance_from_jacobian, jacobian_blocks
-from bayes_disc.inference.model import Problem
+from bayes_disc.inference.fitting.covariance import covariance_from_jacobian
+from bayes_disc.inference.fitting.residuals import jacobian_blocks
+from bayes_disc.inference.model.problem import Problem
 from bayes_disc.observation.inertial_synth import LoggerSpec, synthetic_log
 from bayes_disc.observation.models.inertial import InertialMeasurements
 from bayes_disc.observation.synth import LaunchSpec

@@ -3,7 +3,7 @@ and interpolation, the inertial initial conditions, real logs wired into a run, 
 import numpy as np
 import pytest
 
-from bayes_disc.inference.model import Problem
+from bayes_disc.inference.model.problem import Problem
 from bayes_disc.observation.inertial_synth import LoggerSpec, logger_readings, synthetic_log
 from bayes_disc.observation.models.inertial import InertialMeasurements, interpolate, low_pass
 from bayes_disc.observation.synth import LaunchSpec
@@ -109,9 +109,9 @@ def test_prediction_matches_the_independent_synthesizer():
 
 
 def test_real_logs_enter_a_run_and_the_hammer_is_out_of_model():
-    from bayes_disc.inference.config import load_config
-    from bayes_disc.inference.data import build_problem
-    from bayes_disc.inference.inertial import load_run_throws
+    from bayes_disc.inference.model.config import load_config
+    from bayes_disc.inference.model.data import build_problem
+    from bayes_disc.inference.model.inertial import load_run_throws
     cfg = load_config(REPO / "runs" / "flatball" / "config.yaml")
     throws = load_run_throws(cfg)
     status = {t.name: t.status for t in throws}
@@ -133,8 +133,8 @@ def test_least_squares_recovers_coefficients_and_logger_parameters():
     """Three synthetic throws (noise 0.005/0.05 rad/s, 0.05 m/s²): the joint least-squares optimum lies
     within 4 Laplace sd of the truth for the coefficients, r_s, τ, the tilt and each row period, from the
     data-derived starts (level disc, gyro rates, airflow-direction search)."""
-    from bayes_disc.inference.inertial import InertialThrow, level_start, own_start, search_starts
-    from bayes_disc.inference.leastsq import fit_least_squares
+    from bayes_disc.inference.model.inertial import InertialThrow, level_start, own_start, search_starts
+    from bayes_disc.inference.fitting.leastsq import fit_least_squares
     rng = np.random.default_rng(1)
     logs = [synthetic_log(ls.name, ls.initial_state(), COEF, ls.duration, SPEC, rng) for ls in LAUNCHES]
     throws = [InertialThrow(log, "synth", "ok", "synthetic") for log in logs]

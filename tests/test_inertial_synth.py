@@ -10,7 +10,8 @@ from bayes_disc.cli import main
 from bayes_disc.observation.config_io import ConfigError
 from bayes_disc.observation.imu import find_throws, read_flatball_ins, read_imu_csv
 from bayes_disc.observation.inertial_synth import LoggerSpec, logger_readings, rest_readings
-from bayes_disc.observation.synth import load_synth_spec, synthesize
+from bayes_disc.observation.synth_config import load_synth_spec
+from bayes_disc.observation.synth import synthesize
 
 SYNTH = """
 name: mix

@@ -1,4 +1,4 @@
-"""The posterior averaged over the judgement of outliers and label swaps (issue 16, robust noise): the
+"""The posterior averaged over the judgement of outliers and label swaps (robust noise): the
 mixture likelihood of a recording as given against brute-force enumeration and the Gaussian it reduces to,
 σ integrated out against numerical quadrature, and the importance reweighting of a run's draws."""
 from itertools import combinations, product
@@ -111,7 +111,7 @@ def test_sigma_integrated_out_matches_quadrature():
 
 
 def test_weighted_quantiles_are_hazen_quantiles_and_zero_weights_drop_draws():
-    from bayes_disc.inference.robust import weighted_quantiles
+    from bayes_disc.inference.fitting.robust import weighted_quantiles
     rng = np.random.default_rng(4)
     x = rng.normal(size=501)
     q = np.array([0.05, 0.5, 0.95])

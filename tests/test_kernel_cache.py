@@ -127,8 +127,8 @@ def _simulate_task(spin):
 
 
 def _problem():
-    from bayes_disc.inference.initial import initial_state_from_data
-    from bayes_disc.inference.model import Problem
+    from bayes_disc.inference.model.initial import initial_state_from_data
+    from bayes_disc.inference.model.problem import Problem
     from bayes_disc.observation.synth import DEFAULT_MARKERS, LaunchSpec, SynthSpec, synthesize
     spec = SynthSpec(name="s", flights=(LaunchSpec(name="a", speed=13.0, launch_angle_deg=4, alpha_deg=6,
                                                    spin=60, duration=0.6, noise_mm=1.0),), seed=3)
@@ -144,13 +144,13 @@ def _problem():
 
 
 def _residual_task(args):
-    from bayes_disc.inference.leastsq import whitened_residuals
+    from bayes_disc.inference.fitting.residuals import whitened_residuals
     problem, x = args
     return whitened_residuals(x, problem, np.array([1e-3]))
 
 
 def test_pools_work_under_spawn():
-    from bayes_disc.inference.leastsq import whitened_residuals
+    from bayes_disc.inference.fitting.residuals import whitened_residuals
     problem, theta = _problem()
     spins = [-40.0, -60.0]
     here_sim = [_simulate_task(s) for s in spins]

@@ -1,4 +1,4 @@
-"""Imports flow one way: physics → observation → inference → diagnostics → report → top level (issue #13).
+"""Imports flow one way: physics → observation → inference → diagnostics → report → top level.
 
 Every module of the package is parsed with :mod:`ast`; every import (at module level or inside a function,
 absolute or relative) that names a ``bayes_disc`` module is mapped to the layer of the importing module
@@ -10,13 +10,15 @@ Layers, lowest first:
 0. ``bayes_disc._version`` — the version string; imports nothing;
 1. ``physics`` — constants, frames, equations of motion, simulator;
 2. ``observation`` and ``video`` — recorded data: marker files, cases, synthetic flights, configuration
-   blocks; ``video`` turns footage into SPEC §4 marker tracks, so it is an observation module and may
+   blocks; ``video`` turns footage into marker tracks (docs/data-formats.md), so it is an observation module and may
    import only physics and observation;
-3. ``inference`` — the statistical problem, least squares, sampling;
+3. ``inference`` — the statistical problem (``inference.model``), least squares and profiles
+   (``inference.fitting``), sampling (``inference.sampling``) and results (``inference.results``); its
+   sub-packages form one layer;
 4. ``diagnostics`` — identifiability and missing physics (they refit, so they use inference);
 5. ``report`` — HTML report and figures of a run;
-6. the top level — ``cli``, ``api``, ``jobs`` (the command jobs), ``calibration`` (a package), ``_logging``, the package ``__init__`` and
-   ``__main__``: orchestration (run, then report) and the user interfaces.
+6. the top level — ``cli``, ``api``, the packages ``jobs`` (the command jobs) and ``calibration``, ``_logging``, the
+   package ``__init__`` and ``__main__``: orchestration (run, then report) and the user interfaces.
 
 Imports within one layer (and between ``observation`` and ``video``) are allowed.
 """

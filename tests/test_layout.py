@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 from scipy.special import gammaln
 
-from bayes_disc.inference.initial import initial_state_from_data
-from bayes_disc.inference.layout import IC_NAMES, ParameterLayout
-from bayes_disc.inference.model import Problem
+from bayes_disc.inference.model.initial import initial_state_from_data
+from bayes_disc.inference.model.layout import IC_NAMES, ParameterLayout
+from bayes_disc.inference.model.problem import Problem
 from bayes_disc.observation.markers import FlightObservation
 from bayes_disc.observation.models import MarkerPositions, ObservationModel
 from bayes_disc.observation.registry import (DATA_EXPLANATION, LEARNED, MODEL_EXTENSIONS, OBSERVATION_MODEL, PHYSICS_TERM,

@@ -1,5 +1,5 @@
 """A least-squares optimum that is not the lowest point: the profiles that reach below it, and the refit from
-there before the profiles start again (bayes_disc.inference.profile.LowerOptimum, leastsq.refit_from_lower,
+there before the profiles start again (bayes_disc.inference.fitting.profile.LowerOptimum, leastsq.refit_from_lower,
 run.posterior_approximation)."""
 import json
 from dataclasses import replace
@@ -9,13 +9,15 @@ import pytest
 
 from bayes_disc.cli import main
 from bayes_disc.jobs import identifiability as diag_run
-from bayes_disc.inference import profile
-from bayes_disc.inference.config import load_config
-from bayes_disc.inference.initial import initial_state_from_data
-from bayes_disc.inference.leastsq import minimise, refine_least_squares, whitened_residuals
-from bayes_disc.inference.model import Problem
-from bayes_disc.inference.profile import (LOWER_OPTIMUM_DEVIANCE, LowerOptimum, lowest_point, profile_paths,
-                                          profile_side, ridge_first)
+from bayes_disc.inference.fitting import profile
+from bayes_disc.inference.model.config import load_config
+from bayes_disc.inference.model.initial import initial_state_from_data
+from bayes_disc.inference.fitting.minimiser import minimise
+from bayes_disc.inference.fitting.leastsq import refine_least_squares
+from bayes_disc.inference.fitting.residuals import whitened_residuals
+from bayes_disc.inference.model.problem import Problem
+from bayes_disc.inference.fitting.profile import (LOWER_OPTIMUM_DEVIANCE, LowerOptimum, lowest_point, profile_paths,
+                                                  profile_side, ridge_first)
 from bayes_disc.jobs.sample import posterior_approximation
 from bayes_disc.observation.synth import DEFAULT_MARKERS, LaunchSpec, SynthSpec, synthesize
 

@@ -1,4 +1,4 @@
-"""SPEC §4 marker files: round trip, and every rejection names file, line and problem."""
+"""Marker files (docs/data-formats.md): round trip, and every rejection names file, line and problem."""
 import numpy as np
 import pytest
 

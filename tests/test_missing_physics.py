@@ -15,8 +15,8 @@ import yaml
 from bayes_disc.cli import main
 from bayes_disc.jobs.diagnose import run_diagnose
 from bayes_disc.diagnostics.missing_physics import CANDIDATES, evidence, extend_theta
-from bayes_disc.inference.config import load_config
-from bayes_disc.inference.data import build_problem
+from bayes_disc.inference.model.config import load_config
+from bayes_disc.inference.model.data import build_problem
 from bayes_disc.observation.config_io import ConfigError
 from bayes_disc.observation.explanations import predicted_markers
 from bayes_disc.observation.synth import DEFAULT_MARKERS, LaunchSpec
@@ -144,7 +144,7 @@ def test_reach_is_where_a_term_acts_beyond_the_launch(tmp_path):
     """A ground effect acts in the low flight c (0.45 m) and not in a and b (about 1 m), beyond what their
     launch absorbs; a wind acts in every flight."""
     from bayes_disc.diagnostics.missing_physics import REACH_SD, ModelFit, reach
-    from bayes_disc.inference.leastsq import LeastSquaresResult
+    from bayes_disc.inference.fitting.leastsq import LeastSquaresResult
     cfg = load_config(make_run(tmp_path, {}, seed=1))
 
     def fit_of(problem, theta):
@@ -172,7 +172,7 @@ def test_reach_is_where_a_term_acts_beyond_the_launch(tmp_path):
 # -- end to end ---------------------------------------------------------------------------------------
 
 def test_diagnose_names_a_concealed_side_force(tmp_path, capsys):
-    """The command on data with a concealed side force: SPEC §6 file, words, the right term, the gain."""
+    """The command on data with a concealed side force: the file of docs/outputs.md, words, the right term, the gain."""
     cfg = make_run(tmp_path, CONCEALED["side_force"], seed=3)
     assert main(["diagnose", str(cfg), "--no-sample", "--processes", "2"]) == 0   # forked candidate fits
     out = capsys.readouterr().out

@@ -1,4 +1,4 @@
-"""Marker noise models (issue 16, likelihoods): per-point errors and AR(1) noise against brute-force densities,
+"""Marker noise models (likelihoods): per-point errors and AR(1) noise against brute-force densities,
 σ integrated out against numerical integration, least squares on defective data, the plain model unchanged."""
 from dataclasses import replace
 
@@ -7,14 +7,17 @@ import pytest
 from scipy.integrate import quad
 from scipy.stats import multivariate_normal
 
-from bayes_disc.inference.initial import initial_state_from_data
-from bayes_disc.inference.leastsq import _rms, jacobian_blocks, refine_least_squares
-from bayes_disc.inference.model import Problem
+from bayes_disc.inference.model.initial import initial_state_from_data
+from bayes_disc.inference.fitting.leastsq import _rms, refine_least_squares
+from bayes_disc.inference.fitting.residuals import jacobian_blocks
+from bayes_disc.inference.model.problem import Problem
 from bayes_disc.observation.markers import FlightObservation, flights_from_table, read_marker_csv
 from bayes_disc.observation.models import MarkerPositions, gaussian_marginal_loglik
 from bayes_disc.observation.models.noise import AR1Noise, WhiteNoise, frame_index, marker_noise
 from bayes_disc.observation.synth import DEFAULT_MARKERS, LaunchSpec, SynthSpec, synthesize
 from bayes_disc.physics import Disc, Environment, literature_coefficients
+
+from conftest import run_config, write_two_flights
 
 MB = np.array(list(DEFAULT_MARKERS.values()))
 IDS = tuple(DEFAULT_MARKERS)
@@ -257,7 +260,7 @@ def test_per_point_errors_weight_the_fit(clean):
     coefficient uncertainties are smaller, overall, than with one σ for the flight (a coefficient pinned by its
     prior may not gain). Both covariances are taken at the per-point optimum: this 0.5 s flight leaves CM0–CMa
     in a flat, curved valley where the one-σ fit's optimum (and its local curvature, ×6 in CM0's sd) depends on
-    the minimiser's path (scipy's TRF and the block Levenberg–Marquardt stop 0.16 apart in cost), which is not
+    the minimiser's path (scipy's TRF and the block Levenberg–Marquardt end 0.16 apart in cost), which is not
     what the weighting changes."""
     rng = np.random.default_rng(12)
     n = clean.times.size
@@ -280,8 +283,8 @@ def test_plain_gaussian_log_prob_is_unchanged_on_the_demo_data():
     observed points (:meth:`MarkerPositions.effective_sum_squares`), in another order than numpy's pairwise
     sum of the residual array."""
     from conftest import REPO
-    from bayes_disc.inference.config import load_config
-    from bayes_disc.inference.data import build_problem
+    from bayes_disc.inference.model.config import load_config
+    from bayes_disc.inference.model.data import build_problem
     cfg = load_config(REPO / "runs" / "demo" / "config.yaml")
     problem = build_problem(cfg)
     assert all(c.noise.white for ch in problem.channels for c in ch)
@@ -296,28 +299,14 @@ def test_plain_gaussian_log_prob_is_unchanged_on_the_demo_data():
 
 
 # --------------------------------------------------------------------------------------------- the pipeline
-CONFIG = """name: {name}
-flights:
-  - file: flights.csv
-markers:
-  "0": [0.100, 0.000, -0.015]
-  "1": [-0.0308, 0.0846, -0.015]
-  "2": [-0.0707, -0.0778, -0.015]
-{extra}
-"""
 
 
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory):
     """Two short synthetic flights; flight b's rows carry a sigma_m column (flight a's are empty)."""
     from bayes_disc.observation.markers import write_marker_csv
-    from bayes_disc.observation.synth import write_synth
     d = tmp_path_factory.mktemp("noise")
-    flights = (LaunchSpec(name="a", speed=12.0, launch_angle_deg=4, alpha_deg=8, spin=55, duration=0.25,
-                          noise_mm=1.5, dropout=0.05),
-               LaunchSpec(name="b", speed=10.0, launch_angle_deg=8, alpha_deg=14, spin=-50, duration=0.25,
-                          noise_mm=2.5, dropout=0.0))
-    write_synth(synthesize(SynthSpec(name="s", flights=flights, seed=4)), d / "flights.csv", d / "truth.json")
+    write_two_flights(d, 0.25)
     table = read_marker_csv(d / "flights.csv")
     table.extra["sigma_m"] = np.where(table.flight == "b", np.linspace(1e-3, 4e-3, len(table)), np.nan)
     write_marker_csv(d / "flights.csv", table)
@@ -325,14 +314,14 @@ def folder(tmp_path_factory):
 
 
 def _config(folder, name, extra):
-    from bayes_disc.inference.config import load_config
+    from bayes_disc.inference.model.config import load_config
     path = folder / f"{name}.yaml"
-    path.write_text(CONFIG.format(name=name, extra=extra))
+    path.write_text(run_config(name, extra))
     return load_config(path)
 
 
 def test_noise_configuration_keys_and_errors(folder):
-    from bayes_disc.inference.data import build_problem
+    from bayes_disc.inference.model.data import build_problem
     from bayes_disc.observation.config_io import ConfigError
     cfg = _config(folder, "c", "noise: {model: ar1}\nflight_options: {b: {noise: {per_point: false}}}")
     assert cfg.flight_noise("a")[0].model == "ar1" and cfg.flight_noise("b")[0].per_point == "false"
@@ -355,10 +344,11 @@ def test_noise_configuration_keys_and_errors(folder):
 def test_ar1_and_per_point_run_through_the_outputs(folder):
     """Fake chains around the truth through σ draws, posterior.nc (rho with a flight dimension, pointwise
     log-likelihood = the exact conditional log-likelihood, predictive draws) and summary.json."""
-    from bayes_disc.inference.data import build_problem
-    from bayes_disc.inference.results import build_inference_data, build_summary
-    from bayes_disc.inference.describe import noise_info, noise_words
-    from bayes_disc.inference.sampler import Chains
+    from bayes_disc.inference.model.data import build_problem
+    from bayes_disc.inference.results.idata import build_inference_data
+    from bayes_disc.inference.results.summary import build_summary
+    from bayes_disc.inference.model.describe import noise_info, noise_words
+    from bayes_disc.inference.sampling.chains import Chains
     cfg = _config(folder, "r", "flight_options: {a: {noise: {model: ar1, per_point: false}}}")
     problem = build_problem(cfg)
     info = noise_info(problem)
@@ -408,7 +398,7 @@ def test_robust_flags_an_outlier_and_recognises_a_swap(clean):
     """A 5 cm outlier and one frame with markers 0 and 2 exchanged, on a least-squares fit of a short flight:
     the outlier is listed as an outlier, the frame as a swap of 0 and 2 (not as two outliers), and the
     refit on the cleaned data recovers the clean fit."""
-    from bayes_disc.inference.robust import robust_refit
+    from bayes_disc.inference.fitting.robust import robust_refit
     rng = np.random.default_rng(21)
     pos = clean.positions + 1.5e-3 * rng.normal(size=clean.positions.shape)
     plain = replace(clean, positions=pos.copy())
@@ -435,7 +425,7 @@ def test_gaussian_runs_are_warned_of_gross_errors_and_clean_data_are_not(clean, 
     (`noise: {model: robust}`) before sampling; on clean data (and with robust noise) nothing is said."""
     import logging
 
-    from bayes_disc.inference.robust import gross_error_advice, suspected_gross_errors
+    from bayes_disc.inference.fitting.robust import gross_error_advice, suspected_gross_errors
     from bayes_disc.jobs.sample import _robust
     rng = np.random.default_rng(22)
     pos = clean.positions + 1.5e-3 * rng.normal(size=clean.positions.shape)
@@ -507,7 +497,7 @@ def test_sample_with_robust_and_ar1_noise_writes_the_flags(tmp_path, monkeypatch
     m = {str(table.marker[r]): r for r in frame}
     table.xyz[[m["0"], m["1"]]] = table.xyz[[m["1"], m["0"]]]
     write_marker_csv(tmp_path / "flights.csv", table)
-    (tmp_path / "config.yaml").write_text(CONFIG.format(name="rob", extra=(
+    (tmp_path / "config.yaml").write_text(run_config("rob", (
         "output: out\nnoise: {model: robust}\nflight_options: {b: {noise: {model: ar1}}}\n"
         "sampler: {ensembles: 2, max_steps: 30, adapt_steps: 10, check_every: 10, min_steps: 10, seed: 5}\n"
         "least_squares: {starts: 1}")))
@@ -532,7 +522,7 @@ def test_sample_with_robust_and_ar1_noise_writes_the_flags(tmp_path, monkeypatch
     post = az.from_netcdf(str(tmp_path / "out" / "posterior.nc")).posterior
     assert np.isfinite(post["rho"].sel(flight="b")).all() and np.isnan(post["rho"].sel(flight="a")).all()
     # the posterior averaged over the judgement: the sampled draws (at most JUDGEMENT_DRAWS) reweighted
-    from bayes_disc.inference.robust import JUDGEMENT_DRAWS
+    from bayes_disc.inference.fitting.robust import JUDGEMENT_DRAWS
     avg = json.loads((tmp_path / "out" / "judgement_average.json").read_text())
     assert avg["draws"] == min(JUDGEMENT_DRAWS, post.sizes["chain"] * post.sizes["draw"]) and avg["failed"] == 0
     assert np.isfinite(avg["pareto_k"]) and 1 <= avg["ess"] <= avg["draws"]
@@ -548,7 +538,7 @@ def test_sample_with_robust_and_ar1_noise_writes_the_flags(tmp_path, monkeypatch
 
 @pytest.mark.slow
 def test_four_flights_with_outliers_and_swaps_sampled_inside_the_clean_intervals(tmp_path, monkeypatch):
-    """Issue 16: four flights with 2–6 cm outliers on 1 % of the points and labels swapped in a few frames,
+    """Four flights with 2–6 cm outliers on 1 % of the points and labels swapped in a few frames,
     sampled with ``noise.model: robust``: every injected defect is listed, and every coefficient's median
     lies inside the 90 % interval of the same data without the defects (sampled with the plain model), both
     given the judgement and averaged over it."""
@@ -579,7 +569,7 @@ def test_four_flights_with_outliers_and_swaps_sampled_inside_the_clean_intervals
         swaps.append((name, float(t)))
     write_marker_csv(tmp_path / "defects" / "flights.csv", table)
     for d, model in (("clean", "gaussian"), ("defects", "robust")):
-        (tmp_path / d / "config.yaml").write_text(CONFIG.format(name=d, extra=(
+        (tmp_path / d / "config.yaml").write_text(run_config(d, (
             f"output: out\nnoise: {{model: {model}}}\nsampler: {{seed: 3, max_steps: 1500}}")))
         assert main(["sample", str(tmp_path / d / "config.yaml"), "--no-progress"]) == 0
     clean_s = json.loads((tmp_path / "clean" / "out" / "summary.json").read_text())

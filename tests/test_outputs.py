@@ -4,7 +4,7 @@ import hashlib
 import pytest
 
 from bayes_disc.cli import main
-from bayes_disc.inference.config import load_config
+from bayes_disc.inference.model.config import load_config
 from bayes_disc.jobs.outputs import JOB_FILES, check_fresh_output, existing_results, reports_dir
 from bayes_disc.observation.config_io import ConfigError
 from bayes_disc.observation.demo import DEMO_FILES, demo_file, write_demo

@@ -1,6 +1,6 @@
 """Partial explanations in ``bayes-disc diagnose``: the noise floor, the share of the excess misfit a
 candidate removes, and the adoption of the best partial explanation when nature does not use the library's
-formula (issue 17).
+formula.
 
 The end-to-end case conceals two effects: a ground effect with a Gaussian decay (a form of nature, not
 the library's exp(−z/h) family) and a small side force that saturates with spin, of a kind the diagnosis is
@@ -15,7 +15,7 @@ from bayes_disc.cli import main
 from bayes_disc.jobs.diagnose import run_diagnose
 from bayes_disc.diagnostics.missing_physics import SHARE_PARTIAL, excess_share
 from bayes_disc.diagnostics.residuals import FlightResiduals, noise_floor, second_difference_variance
-from bayes_disc.inference.config import load_config
+from bayes_disc.inference.model.config import load_config
 from bayes_disc.observation.models.base import ResidualSeries
 from bayes_disc.observation.synth import DEFAULT_MARKERS
 

@@ -219,7 +219,7 @@ def test_kernel_rhs_template_equals_the_readable_equations():
 
 
 def test_one_extension_vector_serves_a_whole_batch():
-    """extension (n_ext,) or None (off values) applies to every lane of a batch (SPEC: (B, n) or (n,))."""
+    """extension (n_ext,) or None (off values) applies to every lane of a batch ((B, n) or (n,))."""
     terms = get_terms(["wind", "side_force"])
     y0 = np.stack([_state(speed=s) for s in (11.0, 13.0, 15.0)])
     t = np.arange(0.0, 0.3, 1 / 120)

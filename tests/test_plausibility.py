@@ -1,5 +1,5 @@
 """Physical plausibility before fitting (bayes_disc.observation.plausibility) and the absurd-RMS stop
-after least squares (bayes_disc.inference.fit_checks): good data pass, each kind of nonsense is named."""
+after least squares (bayes_disc.inference.fitting.fit_checks): good data pass, each kind of nonsense is named."""
 import dataclasses
 from pathlib import Path
 
@@ -8,12 +8,12 @@ import pytest
 import yaml
 
 from bayes_disc.cli import main
-from bayes_disc.inference.config import load_config
-from bayes_disc.inference.data import build_problem
-from bayes_disc.inference.fit_checks import MAX_PLAUSIBLE_RMS_M
-from bayes_disc.inference.initial import initial_state_from_data
-from bayes_disc.inference.leastsq import fit_least_squares
-from bayes_disc.inference.model import Problem
+from bayes_disc.inference.model.config import load_config
+from bayes_disc.inference.model.data import build_problem
+from bayes_disc.inference.fitting.fit_checks import MAX_PLAUSIBLE_RMS_M
+from bayes_disc.inference.model.initial import initial_state_from_data
+from bayes_disc.inference.fitting.leastsq import fit_least_squares
+from bayes_disc.inference.model.problem import Problem
 from bayes_disc.observation.markers import (MarkerFileError, load_flights, read_marker_csv, table_from_flights,
                                             write_marker_csv)
 from bayes_disc.observation.plausibility import (ImplausibleDataError, check_flight, check_flights,

@@ -10,16 +10,9 @@ from bayes_disc.cli import main
 from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
 from bayes_disc.physics import COEFFICIENT_NAMES
 
-CONFIG = """name: held
-flights:
-  - file: flights.csv
-markers:
-  "0": [0.100, 0.000, -0.015]
-  "1": [-0.0308, 0.0846, -0.015]
-  "2": [-0.0707, -0.0778, -0.015]
-least_squares: {starts: 1}
-output: out
-"""
+from conftest import run_config
+
+CONFIG = run_config("held", "least_squares: {starts: 1}", "output: out")
 
 
 def _summary(folder, truth, scale=None):

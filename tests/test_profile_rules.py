@@ -1,9 +1,9 @@
-"""The profile path's stopping rule and the Laplace marginal's volume term (bayes_disc.inference.profile)."""
+"""The profile path's stopping rule and the Laplace marginal's volume term (bayes_disc.inference.fitting.profile)."""
 import numpy as np
 import pytest
 
-from bayes_disc.inference.profile import (EXTENDED_POINTS, FAILED_DEVIANCE_FACTOR, MARGINAL_RISE, MAX_DEVIANCE,
-                                          MAX_POINTS, conditional_log_volume, side_done)
+from bayes_disc.inference.fitting.profile import (EXTENDED_POINTS, FAILED_DEVIANCE_FACTOR, MARGINAL_RISE,
+                                                  MAX_DEVIANCE, MAX_POINTS, conditional_log_volume, side_done)
 
 
 def test_conditional_log_volume_is_half_the_log_determinant_of_the_conditional_covariance():
@@ -46,7 +46,7 @@ def test_a_side_stops_where_the_profile_or_else_the_marginal_says():
 def test_conditional_start_is_the_constrained_optimum_of_a_quadratic():
     """For a Gaussian posterior (quadratic cost ½ (x − μ)ᵀ H (x − μ)) the start of a profile fit is its exact
     optimum with θ_i held: the free block solves H_ff (x_f − μ_f) = −H_fi (v − μ_i)."""
-    from bayes_disc.inference.profile import conditional_start
+    from bayes_disc.inference.fitting.profile import conditional_start
     rng = np.random.default_rng(5)
     A = rng.normal(size=(6, 6))
     H = A @ A.T + 6 * np.eye(6)
@@ -62,7 +62,7 @@ def test_bent_start_is_exact_on_a_parabolic_path():
     """A path θ_1*(v) = c v² profiled along θ_0 = v: the conditional start follows the tangent and misses by
     c h² over a step h; :func:`bent_start` adds the last miss scaled by the steps' ratio squared and lands on
     the path exactly, for any step."""
-    from bayes_disc.inference.profile import bent_start, conditional_start
+    from bayes_disc.inference.fitting.profile import bent_start, conditional_start
     c = 0.7
 
     def point(v):

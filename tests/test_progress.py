@@ -7,7 +7,6 @@ import logging
 import re
 import shutil
 import subprocess
-from dataclasses import replace
 from pathlib import Path
 
 import emcee
@@ -17,26 +16,17 @@ import pytest
 
 from bayes_disc.cli import main
 from bayes_disc.jobs import sample as run_module
-from bayes_disc.inference.config import SamplerSettings, load_config
+from bayes_disc.inference.model.config import SamplerSettings, load_config
 from bayes_disc.jobs.sample import run_sample
-from bayes_disc.inference.sampler import Progress, _Bar, convergence_fraction
+from bayes_disc.inference.sampling.progress import Progress, _Bar
+from bayes_disc.inference.sampling.stopping import convergence_fraction
 from bayes_disc.observation.config_io import ConfigError
-from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
 
-from conftest import REPO
+from conftest import REPO, run_config, write_short_flight
 
-CONFIG = """name: prog
-flights:
-  - file: flights.csv
-markers:
-  "0": [0.100, 0.000, -0.015]
-  "1": [-0.0308, 0.0846, -0.015]
-  "2": [-0.0707, -0.0778, -0.015]
-prior: potts_crowther
-output: out
-sampler: {ensembles: 3, max_steps: 45, adapt_steps: 15, check_every: 15, min_steps: 10, seed: 5}
-least_squares: {starts: 2}
-"""
+CONFIG = run_config("prog", "prior: potts_crowther", "output: out",
+                    "sampler: {ensembles: 3, max_steps: 45, adapt_steps: 15, check_every: 15, min_steps: 10, seed: 5}",
+                    "least_squares: {starts: 2}")
 
 
 class _Records(logging.Handler):
@@ -51,9 +41,7 @@ class _Records(logging.Handler):
 
 
 def _small_run_folder(folder: Path) -> Path:
-    f = LaunchSpec(name="short", speed=12.0, launch_angle_deg=4, alpha_deg=8, spin=55, duration=0.5,
-                   noise_mm=1.5, dropout=0.02)
-    write_synth(synthesize(SynthSpec(name="s", flights=(f,), seed=3)), folder / "flights.csv", folder / "truth.json")
+    write_short_flight(folder)
     cfg = folder / "config.yaml"
     cfg.write_text(CONFIG)
     return cfg

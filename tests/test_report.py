@@ -14,7 +14,6 @@ import pytest
 from PIL import Image
 
 from bayes_disc.cli import main
-from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
 from bayes_disc.report import DEFAULT_SECTION_IDS, ReportInputError, Section, build_report, default_builders
 from bayes_disc.report.context import ReportContext, load_run
 from bayes_disc.report.html import render_document
@@ -22,24 +21,14 @@ from bayes_disc.report.run import build_sections
 from bayes_disc.report.sections import fmt_estimate
 from bayes_disc.physics.windtunnel import load_wind_tunnel
 
-from conftest import require_outside_input
+from conftest import require_outside_input, run_config, write_short_flight
 
 CHROMIUM = "/usr/bin/chromium"
 FIGURES = ("corner", "trace", "ranks", "residuals", "angle_of_attack", "trajectories", "posterior_predictive",
            "force_curves", "posterior_correlation")
-CONFIG = """name: tiny
-flights:
-  - file: flights.csv
-markers:
-  "0": [0.100, 0.000, -0.015]
-  "1": [-0.0308, 0.0846, -0.015]
-  "2": [-0.0707, -0.0778, -0.015]
-prior: potts_crowther
-output: out
-truth: truth.json
-sampler: {ensembles: 2, max_steps: 60, adapt_steps: 20, check_every: 15, min_steps: 10, seed: 5}
-least_squares: {starts: 1}
-"""
+CONFIG = run_config("tiny", "prior: potts_crowther", "output: out", "truth: truth.json",
+                    "sampler: {ensembles: 2, max_steps: 60, adapt_steps: 20, check_every: 15, min_steps: 10, seed: 5}",
+                    "least_squares: {starts: 1}")
 
 
 class _Doc(HTMLParser):
@@ -90,9 +79,7 @@ def _parse(text: str) -> _Doc:
 def tiny(tmp_path_factory):
     """A one-flight synthetic run (a few seconds of sampling) and its report."""
     d = tmp_path_factory.mktemp("tiny")
-    f = LaunchSpec(name="short", speed=12.0, launch_angle_deg=4, alpha_deg=8, spin=55, duration=0.5,
-                   noise_mm=1.5, dropout=0.02)
-    write_synth(synthesize(SynthSpec(name="s", flights=(f,), seed=3)), d / "flights.csv", d / "truth.json")
+    write_short_flight(d)
     (d / "config.yaml").write_text(CONFIG)
     with pytest.MonkeyPatch.context() as mp:
         mp.chdir(d)  # nothing may land in the working directory: the report goes with the run

@@ -1,9 +1,9 @@
 """Locating a mismatch: residual whiteness and direction (bayes_disc.diagnostics.residuals)."""
 import numpy as np
 
-from bayes_disc.inference.leastsq import fit_least_squares
-from bayes_disc.inference.model import Problem
-from bayes_disc.inference.initial import initial_state_from_data
+from bayes_disc.inference.fitting.leastsq import fit_least_squares
+from bayes_disc.inference.model.problem import Problem
+from bayes_disc.inference.model.initial import initial_state_from_data
 from bayes_disc.diagnostics.residuals import DIRECTIONS, ROTATIONS, localise, ljung_box, structured_windows
 from bayes_disc.observation.synth import DEFAULT_MARKERS, LaunchSpec, SynthSpec, synthesize
 

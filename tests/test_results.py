@@ -12,45 +12,33 @@ import h5py
 import numpy as np
 import pytest
 
-from bayes_disc.inference.config import load_config
-from bayes_disc.inference.data import build_problem
-from bayes_disc.inference.diagnostics_mcmc import rhat_across
-from bayes_disc.inference.results import (build_inference_data, build_summary, compare_runs, ensemble_view,
-                                          load_posterior, pointwise_log_likelihood, posterior_draws, summarize,
-                                          summary_names, write_posterior, writing_posterior)
-from bayes_disc.inference.sampler import Chains
-from bayes_disc.inference.truth import truth_theta
-from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
+from bayes_disc.inference.model.config import load_config
+from bayes_disc.inference.model.data import build_problem
+from bayes_disc.inference.sampling.mcmc_stats import rhat
+from bayes_disc.inference.results.idata import build_inference_data, pointwise_log_likelihood
+from bayes_disc.inference.results.summary import build_summary, summarize, summary_names
+from bayes_disc.inference.results.compare import compare_runs
+from bayes_disc.inference.results.draws import ensemble_view, posterior_draws
+from bayes_disc.inference.results.posterior_file import load_posterior, write_posterior, writing_posterior
+from bayes_disc.inference.sampling.chains import Chains
+from bayes_disc.inference.model.truth import truth_theta
 
-CONFIG = """name: {name}
-flights:
-  - file: flights.csv
-markers:
-  "0": [0.100, 0.000, -0.015]
-  "1": [-0.0308, 0.0846, -0.015]
-  "2": [-0.0707, -0.0778, -0.015]
-prior: potts_crowther
-output: out_{name}
-{extra}
-"""
+from conftest import run_config, write_two_flights
+
 N_ENS, N_STEPS, N_W = 2, 12, 6
 
 
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory):
     d = tmp_path_factory.mktemp("results")
-    flights = (LaunchSpec(name="a", speed=12.0, launch_angle_deg=4, alpha_deg=8, spin=55, duration=0.3,
-                          noise_mm=1.5, dropout=0.05),
-               LaunchSpec(name="b", speed=10.0, launch_angle_deg=8, alpha_deg=14, spin=-50, duration=0.3,
-                          noise_mm=2.5, dropout=0.0))
-    write_synth(synthesize(SynthSpec(name="s", flights=flights, seed=4)), d / "flights.csv", d / "truth.json")
+    write_two_flights(d, 0.3)
     return d
 
 
 def _run(folder: Path, name: str, extra: str = "", seed: int = 0):
     """(problem, chains, idata, summary) of a short fake run around the truth, written to out_<name>/."""
     cfg_path = folder / f"{name}.yaml"
-    cfg_path.write_text(CONFIG.format(name=name, extra=extra))
+    cfg_path.write_text(run_config(name, "prior: potts_crowther", f"output: out_{name}", extra))
     problem = build_problem(load_config(cfg_path))
     rng = np.random.default_rng(seed)
     theta0 = truth_theta(problem, json.loads((folder / "truth.json").read_text()))
@@ -133,7 +121,7 @@ def test_posterior_has_flight_dimension_and_ensemble_walker_coords(base, folder)
     k = problem.names.index("vz_b")
     np.testing.assert_array_equal(post["vz"].sel(flight="b").values[N_W + 2], chains.chain[1, :, 2, k])
     np.testing.assert_array_equal(posterior_draws(post, "sigma_a")[3], chains.sigma[0, :, 3, 0])
-    # summary.json keeps SPEC §6's flat names, read back from the flight dimension
+    # summary.json keeps the flat names of docs/outputs.md, read back from the flight dimension
     for n in problem.names + problem.sigma_names:
         assert summary["parameters"][n]["mean"] == pytest.approx(posterior_draws(post, n).mean(), rel=1e-12)
 
@@ -156,7 +144,7 @@ def test_summary_statistics_are_arviz_summary_and_r_hat_across_ensembles(base):
         assert p[name]["mcse_mean"] == pytest.approx(float(centred.loc["v", "mcse_mean"]), rel=1e-12), name
         assert p[name]["r_hat_walkers"] == pytest.approx(row["r_hat"], rel=1e-12)
     # r_hat: the sampler's statistic across ensembles, reproducible from posterior.nc alone
-    theta_rh = rhat_across(chains.chain)
+    theta_rh = rhat(chains.chain, layout="ensembles")
     across = az.rhat(ensemble_view(idata.posterior))
     for i, name in enumerate(problem.names):
         assert p[name]["r_hat"] == pytest.approx(theta_rh[i], rel=1e-12)

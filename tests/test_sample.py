@@ -1,6 +1,5 @@
 """`bayes-disc sample`: determinism, resume, recovery of the truth, and the paper's narrow-α finding."""
 import json
-import shutil
 from pathlib import Path
 
 import arviz as az
@@ -10,14 +9,7 @@ import pytest
 from bayes_disc.cli import main
 from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize, write_synth
 
-from conftest import REPO, keep_flights
-
-MARKERS_YAML = """markers:
-  "0": [0.100, 0.000, -0.015]
-  "1": [-0.0308, 0.0846, -0.015]
-  "2": [-0.0707, -0.0778, -0.015]
-"""
-
+from conftest import MARKERS_YAML, REPO, keep_flights
 
 @pytest.fixture(autouse=True)
 def _in_tmp(tmp_path, monkeypatch):
@@ -58,7 +50,7 @@ def test_same_seed_same_summary_and_outputs(tmp_path):
     for f in a["flights"]:
         a["flights"][f].pop("file"), b["flights"][f].pop("file")
     assert a == b
-    # SPEC §6 keys for every coefficient and the flight's σ
+    # the keys of docs/outputs.md for every coefficient and the flight's σ
     for name in ["CL0", "CLa", "CD0", "CDa", "CM0", "CMa", "CMq", "CRr", "CRp", "CNr", "sigma_short"]:
         assert set(a["parameters"][name]) >= {"mean", "sd", "q05", "q50", "q95", "r_hat", "ess_bulk"}
     assert set(a["parameters"]["CLa"]) >= {"ess_tail", "mcse_mean", "mcse_sd", "r_hat_walkers"}
@@ -176,7 +168,7 @@ def _importance_moments(problem, q, rng_seed: int = 1, batches: int = 9, per_bat
 
 def _with_defensive_gaussian(q, samples: np.ndarray, inflation: float = 1.2):
     """``q`` made defensive by an equal share of a Gaussian on the samples' moments (sd × ``inflation``)."""
-    from bayes_disc.inference.proposals import CompositeProposal, MixtureProposal
+    from bayes_disc.inference.sampling.proposals import CompositeProposal, MixtureProposal
     gauss = MixtureProposal.from_components([samples.mean(axis=0)], [np.cov(samples.T) * inflation ** 2], [0.0])
     return CompositeProposal(q.parts + (gauss,), np.log(np.r_[0.5 * np.exp(q.log_weights), 0.5]))
 
@@ -205,10 +197,10 @@ class _StudentT:
 
 def _with_defensive_t(q, samples: np.ndarray, nu: float = 4.0):
     """``q`` made defensive by an equal share of a Student t (ν = 4) on the samples' moments: heavier tails
-    than a Gaussian's, where the posterior's valley runs past every ridge component. On the four-flight run
-    of stop 39 a Gaussian share (sd × 1.2, 1.5 or 2) left Pareto k̂ at 0.81 (stop 38's run: 0.809, 0.001
+    than a Gaussian's, where the posterior's valley runs past every ridge component. On a four-flight run
+    a Gaussian share (sd × 1.2, 1.5 or 2) left Pareto k̂ at 0.81 (an earlier run's: 0.809, 0.001
     inside the rule), the t share 0.72."""
-    from bayes_disc.inference.proposals import CompositeProposal
+    from bayes_disc.inference.sampling.proposals import CompositeProposal
     t = _StudentT(samples.mean(axis=0), np.cov(samples.T), nu)
     return CompositeProposal(q.parts + (t,), np.log(np.r_[0.5 * np.exp(q.log_weights), 0.5]))
 
@@ -227,9 +219,9 @@ def test_sampler_agrees_with_importance_sampling(four_flights_run, four_flights)
     the run's ridge-aware independence proposal, made defensive by an equal share of a Student t (ν = 4) on
     the MCMC samples' moments (:func:`_with_defensive_t`). Two different estimators: a sampler that misses part of the valley
     the ridge proposals cover fails it (the weights: :func:`_importance_moments`)."""
-    from bayes_disc.inference.config import load_config
-    from bayes_disc.inference.data import build_problem
-    from bayes_disc.inference.proposals import CompositeProposal
+    from bayes_disc.inference.model.config import load_config
+    from bayes_disc.inference.model.data import build_problem
+    from bayes_disc.inference.sampling.proposals import CompositeProposal
     d = four_flights_run
     summary, _ = four_flights
     problem = build_problem(load_config(d / "config.yaml"))
@@ -259,9 +251,9 @@ def test_ar1_posterior_is_as_wide_as_importance_sampling_says(tmp_path):
     from bayes_disc.api import sample
     from bayes_disc.calibration.config import load_cal_config
     from bayes_disc.calibration.replicate import replicate_data, replicate_run
-    from bayes_disc.inference.config import config_from_mapping
-    from bayes_disc.inference.data import build_problem
-    from bayes_disc.inference.proposals import CompositeProposal, MixtureProposal
+    from bayes_disc.inference.model.config import config_from_mapping
+    from bayes_disc.inference.model.data import build_problem
+    from bayes_disc.inference.sampling.proposals import CompositeProposal, MixtureProposal
     cal = load_cal_config(REPO / "runs/calibration/four_flights_ar1.yaml")
     result, _, _, seed = replicate_data(cal, 0)
     write_synth(result, tmp_path / "markers.csv", tmp_path / "truth.json")

@@ -4,7 +4,7 @@ import shutil
 import pytest
 
 from bayes_disc.cli import main
-from bayes_disc.inference.config import load_config
+from bayes_disc.inference.model.config import load_config
 from bayes_disc.observation.config_io import ConfigError
 
 from conftest import REPO
@@ -55,8 +55,8 @@ CASES = {
 
 def test_prior_around_a_published_set(demo_copy):
     """``prior: {around: ...}``: Gaussians at the set's values with sd relative_sd·|value| unless given."""
-    from bayes_disc.inference.data import build_problem
-    from bayes_disc.inference.priors import coefficient_prior
+    from bayes_disc.inference.model.data import build_problem
+    from bayes_disc.inference.model.priors import coefficient_prior
     from bayes_disc.physics import COEFFICIENT_NAMES, literature_coefficients
     cfg = demo_copy / "config.yaml"
     _edit(cfg, "prior: potts_crowther", "prior: {around: hummel2002, relative_sd: 0.2, sd: {CNr: 3.0e-6}}")

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
 
-from bayes_disc.inference.proposals import EIGENVALUE_FLOOR, MixtureProposal, scaled_cholesky
+from bayes_disc.inference.sampling.proposals import EIGENVALUE_FLOOR, MixtureProposal, scaled_cholesky
 
 
 def _mixture():
@@ -71,7 +71,7 @@ def _ridge(target, widen=1.5):
     """A ridge proposal along parameter 0 from the exact profile path of the Gaussian target, with local
     covariances deliberately too wide (a proposal, not the target)."""
     from types import SimpleNamespace
-    from bayes_disc.inference.proposals import RidgeProposal
+    from bayes_disc.inference.sampling.proposals import RidgeProposal
     S, m = target.S, target.m
     pts = []
     for t in np.arange(-3, 4):
@@ -106,7 +106,7 @@ def _dense_conditional(ridge, vi):
 def test_ridge_density_equals_its_conditional_gaussian_point_by_point():
     """The batched forward substitution of RidgeProposal.log_density gives, at every point, ln g(x_i) plus
     the conditional normal density with the interpolated Cholesky factor (scipy, one point at a time)."""
-    from bayes_disc.inference.proposals import RidgeProposal
+    from bayes_disc.inference.sampling.proposals import RidgeProposal
     rng = np.random.default_rng(3)
     K, d = 5, 6
     chols = np.array([np.tril(rng.normal(size=(d, d)), -1) + np.diag(rng.uniform(0.5, 2.0, d)) for _ in range(K)])
@@ -123,7 +123,7 @@ def test_ridge_density_equals_its_conditional_gaussian_point_by_point():
 def test_ridge_draw_uses_the_interpolated_factor_of_its_density():
     """A ridge draw is θ_i from g, then mean(θ_i) + L(θ_i) ε with the same interpolated factor the density
     uses (compiled product checked against the dense (n, d, d) factors, same random numbers)."""
-    from bayes_disc.inference.proposals import RidgeProposal
+    from bayes_disc.inference.sampling.proposals import RidgeProposal
     rng = np.random.default_rng(4)
     K, d = 4, 7
     chols = np.array([np.tril(rng.normal(size=(d, d)), -1) + np.diag(rng.uniform(0.5, 2.0, d)) for _ in range(K)])
@@ -139,8 +139,8 @@ def test_ridge_draw_uses_the_interpolated_factor_of_its_density():
 
 
 def test_composite_independence_move_leaves_the_target_invariant(tmp_path):
-    from bayes_disc.inference.moves import IndependenceJump
-    from bayes_disc.inference.proposals import CompositeProposal
+    from bayes_disc.inference.sampling.moves import IndependenceJump
+    from bayes_disc.inference.sampling.proposals import CompositeProposal
     target = _Target()
     laplace = MixtureProposal.from_components([target.m + 0.5], [np.eye(3)], [0.0])
     comp = CompositeProposal((laplace, _ridge(target)), np.log([0.3, 0.7]))
@@ -157,7 +157,7 @@ def test_composite_independence_move_leaves_the_target_invariant(tmp_path):
 
 
 def test_reweighting_moves_weight_to_the_part_that_explains_the_samples():
-    from bayes_disc.inference.proposals import CompositeProposal
+    from bayes_disc.inference.sampling.proposals import CompositeProposal
     a = MixtureProposal.from_components([np.zeros(2)], [np.eye(2)], [0.0])
     b = MixtureProposal.from_components([np.full(2, 6.0)], [np.eye(2)], [0.0])
     comp = CompositeProposal((a, b), np.log([0.8, 0.2]))
@@ -233,7 +233,7 @@ def test_flight_block_moves_leave_the_posterior_invariant():
     """emcee with only the Gibbs sweep over flights and the shared shift, both shaped by a reference
     covariance that is deliberately wrong (1.7× too wide, correlations dropped), recovers the exact
     posterior's mean and covariance: the per-flight acceptance ratios are exact."""
-    from bayes_disc.inference.moves import FlightBlockMove, SharedShift, block_factors
+    from bayes_disc.inference.sampling.moves import FlightBlockMove, SharedShift, block_factors
     t = _ArrowTarget()
     mean, cov = t.exact()
     reference = np.diag(np.diag(cov)) * 1.7**2
@@ -256,7 +256,7 @@ def test_flight_block_moves_leave_the_posterior_invariant():
 
 
 def test_block_factors_of_a_gaussian_are_its_conditionals():
-    from bayes_disc.inference.moves import block_factors
+    from bayes_disc.inference.sampling.moves import block_factors
     t = _ArrowTarget(seed=2)
     _, cov = t.exact()
     conditional, shared, regression = block_factors(t, cov)
@@ -272,8 +272,8 @@ def test_block_factors_of_a_gaussian_are_its_conditionals():
 def test_default_walkers_with_block_moves():
     """With block moves: 2·dim + 2 walkers on small problems, capped at WALKERS_CAP but never below the block
     minimum 2·(s + p) + 2; without: 2·dim + 2; an explicit count is made even and kept above the minimum."""
-    from bayes_disc.inference.config import SamplerSettings
-    from bayes_disc.inference.sampler import WALKERS_CAP, n_walkers
+    from bayes_disc.inference.model.config import SamplerSettings
+    from bayes_disc.inference.sampling.mixing import WALKERS_CAP, n_walkers
     block, plain = SamplerSettings(block_fraction=0.3), SamplerSettings(block_fraction=0.0)
     small = _ArrowTarget(s=10, p=12, n_flights=4)                 # the demo's sizes: dim 58
     assert n_walkers(block, small) == n_walkers(plain, small) == 2 * 58 + 2
@@ -286,7 +286,7 @@ def test_default_walkers_with_block_moves():
 
 
 def test_block_moves_only_when_the_walkers_cannot_span_the_space():
-    from bayes_disc.inference.sampler import uses_block_moves
+    from bayes_disc.inference.sampling.mixing import uses_block_moves
     assert not uses_block_moves(0.3, 118, 58) and uses_block_moves(0.3, 116, 58)
     assert not uses_block_moves(0.0, 46, 58)
 
@@ -295,7 +295,7 @@ def test_independence_jump_remembers_densities_without_changing_the_chain():
     """IndependenceJump (ln q of unmoved walkers remembered), mixed with DE moves that move some walkers in
     between: the same chain, bit for bit, as emcee's MHMove with the same proposal and seed; and fewer
     density evaluations."""
-    from bayes_disc.inference.moves import IndependenceJump
+    from bayes_disc.inference.sampling.moves import IndependenceJump
     m, S = np.array([1.0, -0.5, 0.2]), np.array([[0.5, 0.3, 0.0], [0.3, 0.4, 0.1], [0.0, 0.1, 0.3]])
     Si = np.linalg.inv(S)
 
@@ -342,7 +342,7 @@ class _Banana:
 def _banana_ridge(shift=0.1, widen=1.3):
     """A ridge proposal along v for :class:`_Banana`, deliberately off: g 1.2 times too wide, the valley's
     floor shifted by ``shift`` in x1, its conditional covariance ``widen`` times too wide."""
-    from bayes_disc.inference.proposals import RidgeProposal
+    from bayes_disc.inference.sampling.proposals import RidgeProposal
     c, v = _Banana.c, np.linspace(-3.5, 3.5, 8)
     means = np.c_[c * v**2 + shift, 0.5 * (c * v**2 + shift)]
     slopes = np.c_[2 * c * v, c * v]
@@ -370,7 +370,7 @@ def test_ridge_carries_leave_the_target_invariant():
     moves z) recover the banana's exact moments, with a proposal whose g, valley floor and conditional
     width are all off. The acceptance ratio needs the Jacobian |L(v′)|/|L(v)|: without it, E v comes out −0.29
     and var x1 1.62 instead of 0 and 1.39 (checked with two seeds when this test was written)."""
-    from bayes_disc.inference.moves import RidgeCarry
+    from bayes_disc.inference.sampling.moves import RidgeCarry
     target = _Banana()
     carry = RidgeCarry((_banana_ridge(),), np.zeros(1))
     moves = [(emcee.moves.MHMove(carry), 0.5), (emcee.moves.GaussianMove(0.05 * np.ones(3)), 0.5)]
@@ -391,7 +391,7 @@ def _arrow_ridge(t, shift=0.3, widen=1.6):
     """A ridge proposal along the shared θ_0 of an :class:`_ArrowTarget`, from its exact profile path with
     the path shifted by ``shift`` sds in every parameter and the local covariances ``widen`` times too wide."""
     from types import SimpleNamespace
-    from bayes_disc.inference.proposals import RidgeProposal
+    from bayes_disc.inference.sampling.proposals import RidgeProposal
     m, S = t.exact()
     sd = np.sqrt(np.diag(S))
     pts = [SimpleNamespace(value=m[0] + u * sd[0], theta=m + S[:, 0] / S[0, 0] * u * sd[0] + shift * sd,
@@ -426,7 +426,7 @@ def test_ridge_moves_leave_an_arrow_posterior_invariant():
     (shifted 0.3 sd, 1.6 times too wide), mixed with a small Gaussian random walk, recover the exact
     posterior's mean and sds. Without the refresh's Hastings factor the flights' sds come out 0.79–0.88 of
     the exact ones and their means up to 0.18 sd off (checked when this test was written)."""
-    from bayes_disc.inference.moves import RidgeCarry, RidgeFlightRefresh
+    from bayes_disc.inference.sampling.moves import RidgeCarry, RidgeFlightRefresh
     t = _ArrowTarget(seed=1, s=3, p=2, n_flights=4)
     mean, cov = t.exact()
     sd = np.sqrt(np.diag(cov))
@@ -451,7 +451,8 @@ def test_block_sparse_ridge_algebra_equals_the_dense_one():
     block only): the compiled loops that skip the zeros give the density, whitening and draws of the same
     factors treated as dense; and from_path with the problem's blocks keeps the dense path's factors to
     rounding on an arrow-structured posterior."""
-    from bayes_disc.inference.proposals import (RidgeProposal, _block_structure, _structure_mask, flight_blocks)
+    from bayes_disc.inference.sampling.proposals import (RidgeProposal, _block_structure, _structure_mask,
+                                                         flight_blocks)
     t = _ArrowTarget(seed=3, s=3, p=2, n_flights=4)
     first, shared = _block_structure(1, t.dim, *flight_blocks(t))
     mask = _structure_mask(first, shared)

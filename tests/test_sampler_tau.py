@@ -3,8 +3,11 @@ import emcee
 import numpy as np
 import pytest
 
-from bayes_disc.inference import sampler
-from bayes_disc.inference.sampler import _tau
+from bayes_disc.inference.sampling import stopping
+from bayes_disc.inference.model.config import SamplerSettings
+from bayes_disc.inference.sampling.chains import StoredChains
+from bayes_disc.inference.sampling.mcmc_stats import rhat
+from bayes_disc.inference.sampling.stopping import _tau
 
 
 def tau_walker_by_walker(chain: np.ndarray, c: float = 5.0) -> np.ndarray:
@@ -51,7 +54,7 @@ def test_batched_tau_equals_emcee_walker_by_walker(n_steps):
 def test_batches_and_threads_do_not_change_tau(monkeypatch):
     x = ar1_chain(200, 16, 9, 0.9, 1)
     whole = _tau(x)
-    monkeypatch.setattr(sampler, "TAU_BATCH_VALUES", 1)   # one parameter per batch
+    monkeypatch.setattr(stopping, "TAU_BATCH_VALUES", 1)   # one parameter per batch
     np.testing.assert_allclose(_tau(x, workers=2), whole, rtol=1e-12)
 
 
@@ -84,26 +87,26 @@ def test_check_on_stored_chains_reads_blocks_and_gives_the_in_memory_verdict(tmp
     paths = [tmp_path / f"ensemble_{e}.h5" for e in range(n_ens)]
     for p, c in zip(paths, chains):
         _write_chain(p, c)
-    settings = sampler.SamplerSettings(ess=100, min_steps=0, processes=2)
+    settings = SamplerSettings(ess=100, min_steps=0, processes=2)
     coef = np.array([0, 2, 7, 11])
-    whole = sampler.convergence(chains[:, 20:], settings, coef, first_step=20)
+    whole = stopping.convergence(chains[:, 20:], settings, coef, first_step=20)
     reads = []
-    block = sampler.StoredChains.block
+    block = StoredChains.block
 
     def spy(self, skip, cols):
         out = block(self, skip, cols)
         reads.append(out.shape[-1])
         return out
 
-    monkeypatch.setattr(sampler, "CHECK_VALUES", n_ens * (n_steps - 20) * n_w * 4)   # blocks of 4 parameters
-    monkeypatch.setattr(sampler.StoredChains, "block", spy)
-    stored = sampler.convergence(sampler.StoredChains(paths, start=20), settings, coef, first_step=20)
+    monkeypatch.setattr(stopping, "CHECK_VALUES", n_ens * (n_steps - 20) * n_w * 4)   # blocks of 4 parameters
+    monkeypatch.setattr(StoredChains, "block", spy)
+    stored = stopping.convergence(StoredChains(paths, start=20), settings, coef, first_step=20)
     assert max(reads) == 4 and sum(reads) == 2 * dim                 # two passes, never the whole chain
     assert whole["rhat_max"] > 1.01                                  # the offset ensemble is seen
     for key in ("burn", "n_over_tau", "rhat_max", "rhat_max_coef", "ess_min_coef", "converged"):
         assert stored[key] == pytest.approx(whole[key], rel=1e-12), key
     np.testing.assert_allclose(stored["tau"], whole["tau"], rtol=1e-12)
     # the coefficients' R-hat alone: the largest of theirs after the burn-in, below every parameter's largest here
-    rh = sampler.rhat_across(chains[:, whole["burn"]:])
+    rh = rhat(chains[:, whole["burn"]:], layout="ensembles")
     assert whole["rhat_max"] == pytest.approx(rh.max(), rel=1e-12)
     assert whole["rhat_max_coef"] == pytest.approx(rh[coef].max(), rel=1e-12) and rh[coef].max() < rh.max()

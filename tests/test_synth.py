@@ -10,7 +10,9 @@ from bayes_disc.observation.config_io import ConfigError
 from bayes_disc.observation.markers import load_flights
 from dataclasses import replace
 
-from bayes_disc.observation.synth import Defects, LaunchSpec, SynthSpec, load_synth_spec, synthesize
+from bayes_disc.observation.synth_defects import Defects
+from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize
+from bayes_disc.observation.synth_config import load_synth_spec
 from bayes_disc.physics import simulate
 
 from conftest import REPO

@@ -1,13 +1,14 @@
-"""θ at the truth of a synthetic data set (bayes_disc.inference.truth)."""
+"""θ at the truth of a synthetic data set (bayes_disc.inference.model.truth)."""
 import numpy as np
 
-from bayes_disc.inference.leastsq import flight_residuals
-from bayes_disc.inference.model import Problem
-from bayes_disc.inference.truth import truth_theta
+from bayes_disc.inference.fitting.residuals import flight_residuals
+from bayes_disc.inference.model.problem import Problem
+from bayes_disc.inference.model.truth import truth_theta
 from bayes_disc.observation.models import MarkerPositions
-from bayes_disc.observation.synth import Defects, LaunchSpec, SynthSpec, synthesize
+from bayes_disc.observation.synth_defects import Defects
+from bayes_disc.observation.synth import LaunchSpec, SynthSpec, synthesize
 from bayes_disc.physics import Disc, Environment
-from bayes_disc.inference.initial import initial_state_from_data
+from bayes_disc.inference.model.initial import initial_state_from_data
 
 MB = np.array([[0.100, 0.000, -0.015], [-0.0308, 0.0846, -0.015], [-0.0707, -0.0778, -0.015]])
 

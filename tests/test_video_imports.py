@@ -14,7 +14,8 @@ from bayes_disc.video.imports import (Points2D, Points3D, detect_format, read_xy
                                       reprojection_check, write_xypts, write_xyzpts)
 from bayes_disc.video.pipeline import run_track
 
-MARKERS = {"0": [0.100, 0.000, -0.015], "1": [-0.0308, 0.0846, -0.015], "2": [-0.0707, -0.0778, -0.015]}
+from conftest import MARKERS
+
 
 
 def cams():

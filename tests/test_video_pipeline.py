@@ -63,7 +63,7 @@ def test_end_to_end_synthetic_footage(tmp_path):
     e = (res.xyz - r.xyz)[m["ok"]]
     chi2 = np.einsum("pi,pij,pj->p", e, np.linalg.inv(res.cov[m["ok"]]), e)
     assert 1.5 < chi2.mean() < 6
-    # the written file is a valid SPEC §4 marker file with the extra columns
+    # the written file is a valid marker file (docs/data-formats.md) with the extra columns
     res.write(tmp_path / "tracks.csv")
     table = read_marker_csv(tmp_path / "tracks.csv", list(MARKERS))
     assert {"reproj_rms_px", "n_views", "cov_xx", "cov_yz"} <= set(table.extra)

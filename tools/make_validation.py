@@ -458,7 +458,6 @@ def section_real() -> list[str]:
         r = s / e["value"]
         ratios.append(r)
         rows.append([name.replace("sigma_", ""), e["unit"], fmt(s), fmt(e["value"]), f"{r:.1f}"])
-    gyro_axial = {n.rsplit("_", 1)[0].split("axial_")[-1]: e["value"] for n, e in floor.items() if "gyro_axial" in n}
     trans = [(n.split("transverse_")[-1], post[n]["q50"]) for n in post if n.startswith("sigma_gyro_transverse")]
     vs_axial = [s / floor[f"sigma_gyro_axial_{f}"]["value"] for f, s in trans]
     L += ["", "Misfit against the sensors' noise: the fitted noise scale of every sensor group (posterior median) "
@@ -519,7 +518,7 @@ def section_speed() -> list[str]:
                  f"{s['solve_ivp']['single_us_per_flight']:.0f}"]]
         errs = s["max_marker_error_m"]["kernel"]
         worst = max(errs.values())
-        L += [f"### Simulator (`benchmarks/results/simulator.json`)", "",
+        L += ["### Simulator (`benchmarks/results/simulator.json`)", "",
               f"A {s['flight']['duration_s']:g} s flight at {s['flight']['rate_hz']:g} Hz, {s['flight']['markers']} "
               f"markers; load average {s['loadavg_1min']:.2f} during the run.", ""]
         L += table(["integrator", "µs per flight"], rows)

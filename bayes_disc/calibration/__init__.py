@@ -1,4 +1,4 @@
-"""Simulation-based calibration of the whole inference (``bayes-disc calibrate CAL.yaml``, SPEC §6).
+"""Simulation-based calibration of the whole inference (``bayes-disc calibrate CAL.yaml``, docs/outputs.md).
 
 Orchestration at the top of the layers, beside :mod:`bayes_disc.jobs`: it uses synthetic flights
 (:mod:`~bayes_disc.observation.synth`), the sampling job (:func:`bayes_disc.api.sample`) and a report page

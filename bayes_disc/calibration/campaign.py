@@ -6,7 +6,7 @@ Layout of the output folder:
   resumed in the same folder must have the same (only N and the output may change);
 * ``replicates/replicate_<i>.json`` — one record per finished replicate (:func:`.replicate.run_replicate`),
   written by the client as each task finishes (atomically: a temporary file, then a rename);
-* ``calibration.json`` — SPEC §6 (``replicates``, per coefficient ``coverage_50``, ``coverage_90``,
+* ``calibration.json`` — docs/outputs.md (``replicates``, per coefficient ``coverage_50``, ``coverage_90``,
   ``rank_uniformity_p``) plus rank counts, the binomial bands and the failed / unconverged replicates;
 * ``calibration.html`` — the report page (:func:`bayes_disc.report.calibration.build_calibration_page`).
 

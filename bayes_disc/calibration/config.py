@@ -30,9 +30,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..inference.config import config_from_mapping
+from ..inference.model.config import config_from_mapping
 from ..observation.config_io import ConfigError, Section, load_yaml
-from ..observation.synth import SynthSpec, load_synth_spec, synth_spec_from_mapping
+from ..observation.synth import SynthSpec
+from ..observation.synth_config import load_synth_spec, synth_spec_from_mapping
 from ..physics import COEFFICIENT_NAMES, LITERATURE, literature_coefficients
 
 #: run-configuration keys a campaign sets itself (from the template and the replicate)
@@ -102,7 +103,7 @@ class CalConfig:
 
     @property
     def names(self) -> list[str]:
-        """The coefficients whose calibration is measured (SPEC §2 names)."""
+        """The coefficients whose calibration is measured (names as in docs/conventions.md)."""
         return list(COEFFICIENT_NAMES)
 
     def key(self) -> dict:
@@ -142,7 +143,7 @@ def _template(path: Path, sec: Section) -> SynthSpec:
 
 
 def _truth(path: Path, sec: Section, prior) -> TruthSpec:
-    from ..inference.priors import coefficient_prior
+    from ..inference.model.priors import coefficient_prior
     t = sec.section("truth")
     draw = t.string("draw", "prior", choices=TRUTH_DRAWS)
     redraws = t.number("max_redraws", 20, integer=True, nonnegative=True)

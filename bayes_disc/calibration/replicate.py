@@ -145,9 +145,9 @@ def replicate_run(cal: CalConfig, result: SynthResult, sampler_seed: int) -> dic
 
 
 def replicate_problem(cal: CalConfig, index: int):
-    """The statistical problem replicate ``index``'s fit builds (:func:`bayes_disc.inference.data.build_problem`
-    on :func:`replicate_run`'s configuration), for checks that do not sample (benchmarks/bench_linear_sbc.py,
-    bench_laplace_coverage.py). The marker flights as the fit reads them, before any robust cleaning and
+    """The statistical problem replicate ``index``'s fit builds (:func:`bayes_disc.inference.model.data.build_problem`
+    on :func:`replicate_run`'s configuration), for checks that do not sample (benchmarks/bench_linear_sbc.py).
+    The marker flights as the fit reads them, before any robust cleaning and
     without inertial logs; the configuration's file paths point into a temporary folder that is gone (use
     its settings only).
 
@@ -161,8 +161,8 @@ def replicate_problem(cal: CalConfig, index: int):
     truth : dict
         The coefficients drawn, {name: value}.
     """
-    from ..inference.config import config_from_mapping
-    from ..inference.data import build_problem
+    from ..inference.model.config import config_from_mapping
+    from ..inference.model.data import build_problem
     result, truth, _, sampler_seed = replicate_data(cal, index)
     with tempfile.TemporaryDirectory(prefix=f"bd-cal-{index:05d}-") as tmp:
         tmp = Path(tmp)
@@ -196,7 +196,7 @@ def run_replicate(cal: CalConfig, index: int) -> dict:
         ``sampler_seed``, ``host``, ``wall_time_s``; the defects injected (per flight, when any).
     """
     from ..api import sample
-    from ..inference.results import posterior_draws
+    from ..inference.results.draws import posterior_draws
     t0 = time.perf_counter()
     result, truth, redraws, sampler_seed = replicate_data(cal, index)
     with tempfile.TemporaryDirectory(prefix=f"bd-cal-{index:05d}-") as tmp:

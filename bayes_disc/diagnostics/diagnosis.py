@@ -2,7 +2,7 @@
 
 Writes into the run's output folder:
 
-* ``diagnosis.json`` (SPEC §6): verdict, accepted effects ranked best first ({id, evidence (ΔBIC),
+* ``diagnosis.json`` (docs/outputs.md): verdict, accepted effects ranked best first ({id, evidence (ΔBIC),
   estimate, where}, with ``status`` — ``explains`` or ``partially_explains`` — and ``share_explained``,
   the share of the base model's excess misfit the term removes with those before it), marker RMS per
   flight before/after [mm] (``rms_before_mm``, ``rms_after_mm``: the flights with markers); ``rms_before``/``rms_after``: every flight's RMS per recorded quantity
@@ -43,17 +43,18 @@ from pathlib import Path
 
 import numpy as np
 
-from ..inference.config import RunConfig
-from ..inference.data import build_problem, load_run_flights
-from ..inference.inertial import load_run_throws
-from ..inference.leastsq import fit_least_squares, refine_least_squares
+from ..inference.model.config import RunConfig
+from ..inference.model.data import build_problem, load_run_flights
+from ..inference.model.inertial import load_run_throws
+from ..inference.fitting.leastsq import fit_least_squares, refine_least_squares
 from ..observation.registry import PHYSICS_TERM, unit
 from ..physics import COEFFICIENT_NAMES
 from ..physics.discrepancy import coefficient_curve
 from .discrepancy import Z_KEEP, LearnedDiscrepancy, family_of, learn_discrepancy
 from .missing_physics import (CANDIDATES, EVIDENCE_THRESHOLD, SHARE_PARTIAL, Diagnosis, ModelFit,
-                              applicable_candidates, describe_where, diagnose, fingerprint, model_fit, structured)
-from .missing_physics import SERIES_WORDS, onset_of_mismatch, onset_unavailable
+                              applicable_candidates, diagnose, model_fit, structured)
+from .mismatch import describe_where, fingerprint
+from .mismatch import SERIES_WORDS, onset_of_mismatch, onset_unavailable
 from .residuals import noise_floor, peak_window
 
 logger = logging.getLogger(__name__)
@@ -288,7 +289,7 @@ def _curve_grid(learned: LearnedDiscrepancy, variable: str) -> np.ndarray:
 
 
 def _family_fit(diag: Diagnosis, family: str | None):
-    """(term, fitted values) of the library family ``family`` from its candidate fit in round 1, or None."""
+    """(term, fitted values) of the library family ``family`` from its candidate fit in the first round, or None."""
     if family is None or not diag.rounds:
         return None
     cand = next((c for c in diag.rounds[0] if c.id == family), None)

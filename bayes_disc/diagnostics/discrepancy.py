@@ -32,7 +32,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..inference.leastsq import covariance_from_jacobian, refine_least_squares, whitened_jacobian, whitened_residuals
+from ..inference.fitting.covariance import covariance_from_jacobian
+from ..inference.fitting.leastsq import refine_least_squares
+from ..inference.fitting.residuals import whitened_jacobian, whitened_residuals
 from ..physics.discrepancy import COLUMNS, DISCREPANCY, DIRECTIONS, FUNCTIONS, basis, column_name
 from .missing_physics import (SHARE_PARTIAL, ModelFit, excess_share, extend_theta, model_fit, replicating_flights,
                               structured)
@@ -253,7 +255,7 @@ def learn_discrepancy(base: ModelFit, build, max_nfev: int = 200, log=lambda msg
     base : ModelFit
         The base model's fit.
     build : callable
-        ``build(ids)`` → the :class:`~bayes_disc.inference.model.Problem` of a model.
+        ``build(ids)`` → the :class:`~bayes_disc.inference.model.problem.Problem` of a model.
     max_nfev : int
         Evaluations of the non-linear refit.
     log : callable

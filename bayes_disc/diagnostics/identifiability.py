@@ -27,7 +27,7 @@ recomputed from the posterior samples (:func:`verdicts_from_covariance` on their
   candidates are marker flights (positions at 120 Hz); a run without marker data gets no design
   (:func:`design_skip_reason`).
 
-Inertial recordings (SPEC §4b) enter the same Fisher information: every flight's own parameters (initial
+Inertial recordings (docs/data-formats.md) enter the same Fisher information: every flight's own parameters (initial
 conditions, and for a logger its row period, biases and filter state) are the nuisance block, the logger's
 shared mount (r_s, τ, tilt) sits beside the coefficients. A logger measures rotation rates and specific
 force, not position: the airspeed and the angle of attack reach the data only through the dynamics (the
@@ -40,9 +40,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..inference.arrow import ArrowJacobian
-from ..inference.leastsq import jacobian_blocks
-from ..inference.model import Problem
+from ..inference.fitting.arrow import ArrowJacobian
+from ..inference.fitting.residuals import jacobian_blocks
+from ..inference.model.problem import Problem
 from ..observation.markers import FlightObservation
 from ..observation.models import MarkerPositions
 from ..observation.synth import LaunchSpec
@@ -97,7 +97,7 @@ def coefficient_information(problem: Problem, J: ArrowJacobian) -> np.ndarray:
     ----------
     problem : Problem
     J : ArrowJacobian
-        Whitened Jacobian over every parameter (:func:`~bayes_disc.inference.leastsq.jacobian_blocks`).
+        Whitened Jacobian over every parameter (:func:`~bayes_disc.inference.fitting.residuals.jacobian_blocks`).
 
     Returns
     -------

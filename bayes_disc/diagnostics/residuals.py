@@ -39,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import chi2
 
-from ..inference.model import Problem
+from ..inference.model.problem import Problem
 from ..observation.models.base import ResidualSeries
 from ..observation.models.markers import DIRECTIONS, ROTATIONS, flight_axes, marker_series
 from ..physics import flight_conditions

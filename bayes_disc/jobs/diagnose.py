@@ -13,7 +13,7 @@ from pathlib import Path
 
 from ..diagnostics.diagnosis import analyse, diagnosis_record, estimates_after, estimates_before, refit_config, \
     write_diagnosis
-from ..inference.config import RunConfig
+from ..inference.model.config import RunConfig
 from .outputs import Outcome, build_run_report
 from .progress import RESULT
 from .sample import run_sample

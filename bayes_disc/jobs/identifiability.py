@@ -31,10 +31,11 @@ import numpy as np
 from ..diagnostics.identifiability import (ALPHA_PAIRS, coefficient_information, data_description,
                                            describe_throw, design_skip_reason, flight_envelopes, marker_noise,
                                            rank_throws, verdicts_from_covariance, weak_directions)
-from ..inference.config import RunConfig
-from ..inference.data import build_problem
-from ..inference.leastsq import fit_least_squares, jacobian_blocks, noise_text
-from ..inference.profile import profiles_through_lowest
+from ..inference.model.config import RunConfig
+from ..inference.model.data import build_problem
+from ..inference.fitting.leastsq import fit_least_squares, noise_text
+from ..inference.fitting.residuals import jacobian_blocks
+from ..inference.fitting.profile import profiles_through_lowest
 from .outputs import Outcome
 from .progress import RESULT
 

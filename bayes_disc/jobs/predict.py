@@ -26,10 +26,11 @@ from scipy.optimize import least_squares
 
 from ..observation.config_io import ConfigError
 from ..observation.models import MarkerPositions
-from ..inference.config import RunConfig
-from ..inference.data import build_problem
-from ..inference.inertial import load_run_throws
-from ..inference.leastsq import FAILED_RESIDUAL, fit_least_squares
+from ..inference.model.config import RunConfig
+from ..inference.model.data import build_problem
+from ..inference.model.inertial import load_run_throws
+from ..inference.fitting.leastsq import fit_least_squares
+from ..inference.fitting.residuals import FAILED_RESIDUAL
 
 log = logging.getLogger(__name__)
 

@@ -200,7 +200,7 @@ class SampleResult(RunResult):
             One group, ``posterior``, dims (chain = ensemble, draw, ...).
         """
         import arviz as az
-        from ..inference.results import ensemble_view
+        from ..inference.results.draws import ensemble_view
         return az.InferenceData(posterior=ensemble_view(self.idata.posterior))
 
 

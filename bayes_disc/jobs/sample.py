@@ -3,7 +3,7 @@
 Writes summary.json, posterior.nc, run_info.json and the least-squares result into the run's output folder
 (and ``flagged.json``, the points judged outliers and frames judged label-swapped, and
 ``judgement_average.json``, the posterior averaged over that judgement, for ``robust`` marker noise:
-:mod:`bayes_disc.inference.robust`).
+:mod:`bayes_disc.inference.fitting.robust`).
 :func:`sample` runs this job, then the run's HTML report (:func:`.outputs.build_run_report`).
 Progress goes to the module's logger (INFO): a line when each stage starts and one when it ends, with
 its duration (:func:`stage`); a line per least-squares start; a bar over the profile likelihoods and one
@@ -11,7 +11,7 @@ of the progress toward convergence while sampling (on a terminal; log lines othe
 table and the convergence line are INFO records marked ``result=True`` (the command line prints those
 on stdout).
 
-``resume=True`` continues from the chain files (:func:`bayes_disc.inference.sampler.run_sampler`) with the saved least-squares
+``resume=True`` continues from the chain files (:func:`bayes_disc.inference.sampling.sampler.run_sampler`) with the saved least-squares
 result and proposals; it refuses a configuration that no longer describes the saved run
 (:func:`check_same_run`).
 """
@@ -25,18 +25,23 @@ from pathlib import Path
 
 import numpy as np
 
-from ..inference.config import RunConfig
-from ..inference.data import build_problem
-from ..inference.describe import data_words, flight_info, noise_info, noise_words
-from ..inference.inertial import load_run_throws
-from ..inference.leastsq import START_FLIGHTS, fit_least_squares, noise_text
-from ..inference.profile import MAX_LOWER_REFITS, lowest_point, profiles_through_lowest
-from ..inference.proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
-from ..inference.results import build_inference_data, build_summary, format_table, prior_record, writing_posterior
-from ..inference.robust import (FLAGGED, JUDGEMENT_AVERAGE, average_over_judgement, gross_error_advice,
+from ..inference.model.config import RunConfig
+from ..inference.model.data import build_problem
+from ..inference.model.describe import data_words, flight_info, noise_info, noise_words
+from ..inference.model.inertial import load_run_throws
+from ..inference.fitting.leastsq import START_FLIGHTS, fit_least_squares, noise_text
+from ..inference.fitting.profile import MAX_LOWER_REFITS, lowest_point, profiles_through_lowest
+from ..inference.sampling.proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
+from ..inference.results.draws import prior_record
+from ..inference.results.idata import build_inference_data
+from ..inference.results.posterior_file import writing_posterior
+from ..inference.results.summary import build_summary, format_table
+from ..inference.fitting.robust import (FLAGGED, JUDGEMENT_AVERAGE, average_over_judgement, gross_error_advice,
                                 robust_flights, robust_refit, suspected_gross_errors, with_saved_flags)
-from ..inference.sampler import n_walkers, run_sampler, saved_steps
-from ..inference.versions import software_versions
+from ..inference.sampling.chains import saved_steps
+from ..inference.sampling.mixing import n_walkers
+from ..inference.sampling.sampler import run_sampler
+from ..inference.results.versions import software_versions
 from ..observation.config_io import ConfigError
 from .outputs import Outcome, build_run_report
 from .progress import RESULT, stage

@@ -1,4 +1,4 @@
-"""Simulation cases in the format of ``shared/reference/NAME.json`` (SPEC §3)."""
+"""Simulation cases in the format of ``shared/reference/NAME.json`` (docs/conventions.md)."""
 from __future__ import annotations
 
 import json
@@ -73,7 +73,7 @@ def load_case(path) -> Case:
 
 
 def simulate_case(case: Case) -> tuple[MarkerTable, np.ndarray]:
-    """Marker table (SPEC §4) and states (n, 13) of a case."""
+    """Marker table (docs/data-formats.md) and states (n, 13) of a case."""
     tr = simulate(case.initial_state, case.coefficients.as_array(), case.times, disc=case.disc,
                   env=case.env, marker_body=case.marker_body)
     if not tr.ok[0]:

@@ -15,7 +15,7 @@ from .registry import DATA_EXPLANATION, PHYSICS_TERM, unit
 
 
 def read_disc_env(path, sec: Section) -> tuple[Disc, Environment]:
-    """The optional ``disc`` and ``environment`` blocks (SI units; defaults SPEC §2).
+    """The optional ``disc`` and ``environment`` blocks (SI units; defaults docs/conventions.md).
 
     Parameters
     ----------

@@ -1,6 +1,6 @@
 """Data explanations: ways the recordings, rather than the flight physics, can disagree with the model.
 
-Each explanation is one small unit like a physics term (:class:`bayes_disc.physics.Term`): SPEC id,
+Each explanation is one small unit like a physics term (:class:`bayes_disc.physics.Term`): an id,
 title, equations and parameters with units and prior scales, plus ``apply``, which turns simulated
 states into predicted marker positions. The model then predicts marker j at sample time t as
 
@@ -29,7 +29,7 @@ from ..physics.frames import quat_from_rotvec, quat_multiply, quat_to_matrix
 
 @dataclass(frozen=True)
 class DataExplanation:
-    """A data explanation: SPEC id, title, equations, its parameters for given marker ids, and ``offsets``
+    """A data explanation: id, title, equations, its parameters for given marker ids, and ``offsets``
     mapping parameter values (B, k) to (Δ (B, m, 3) body offsets [m], δ (B, m) timing offsets [s])."""
 
     id: str
@@ -75,16 +75,6 @@ TIME_OFFSET = DataExplanation(
 )
 
 EXPLANATIONS: dict[str, DataExplanation] = {e.id: e for e in (MARKER_GEOMETRY, TIME_OFFSET)}
-
-
-def get_explanations(ids) -> tuple[DataExplanation, ...]:
-    """Explanations by SPEC id, in the order given; unknown ids raise KeyError naming the known ones."""
-    out = []
-    for i in ids:
-        if i not in EXPLANATIONS:
-            raise KeyError(f"unknown data explanation {i!r}; known: {sorted(EXPLANATIONS)}")
-        out.append(EXPLANATIONS[i])
-    return tuple(out)
 
 
 def predicted_markers(states: np.ndarray, marker_body: np.ndarray, body_offset: np.ndarray | None,

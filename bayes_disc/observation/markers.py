@@ -1,4 +1,4 @@
-"""Marker data files (SPEC §4): read with validation, write, and arrange per flight.
+"""Marker data files (docs/data-formats.md): read with validation, write, and arrange per flight.
 
 CSV, one row per marker per sample, header ``flight,t,marker,x,y,z`` (extra columns allowed, e.g. a
 per-point standard deviation ``sigma_m`` [m] or the per-point covariance ``cov_xx, cov_xy, cov_xz, cov_yy,
@@ -32,7 +32,7 @@ MAX_COORDINATE_M = 1000.0
 
 
 class MarkerFileError(ValueError):
-    """A marker file that breaks SPEC §4; the message names file, line and problem."""
+    """A marker file that breaks the format of docs/data-formats.md; the message names file, line and problem."""
 
     def __init__(self, path, line: int | None, problem: str):
         self.path, self.line, self.problem = str(path), line, problem
@@ -141,7 +141,8 @@ MILLIMETRE_HINT = "looks like millimetres; marker files are in metres (docs/data
 
 
 def _parse_row(row: list[str], line: int, header: list[str], idx: dict, known, path):
-    """Reference validation of one data row (SPEC §4): (flight, t, marker, [x, y, z]) or MarkerFileError."""
+    """Reference validation of one data row (docs/data-formats.md): (flight, t, marker, [x, y, z]) or
+    MarkerFileError."""
     if len(row) != len(header):
         raise MarkerFileError(path, line, f"{len(row)} fields, header has {len(header)}")
     flight = row[idx["flight"]].strip()
@@ -163,7 +164,8 @@ def _parse_row(row: list[str], line: int, header: list[str], idx: dict, known, p
 
 
 def _first_bad_row(rows, lines, header, idx, known, path) -> None:
-    """Raise the error of the first row (file order) that breaks SPEC §4, checked one by one."""
+    """Raise the error of the first row (file order) that breaks the format of docs/data-formats.md, checked one
+    by one."""
     for row, line in zip(rows, lines):
         _parse_row(row, line, header, idx, known, path)
     raise AssertionError("a row was flagged as invalid but passes the row-by-row check")
@@ -205,7 +207,7 @@ def _extra_value(text: str):
 
 
 def read_marker_csv(path, marker_ids=None) -> MarkerTable:
-    """Read and validate a SPEC §4 marker file.
+    """Read and validate a marker file (docs/data-formats.md).
 
     Parameters
     ----------
@@ -342,7 +344,7 @@ def _median_spacing(t, marker, xyz, max_samples: int = 200) -> float | None:
 
 
 def write_marker_csv(path, table: MarkerTable, precision: int = 9) -> None:
-    """Write a SPEC §4 file (extra columns after the required ones, in ``table.extra`` order)."""
+    """Write a marker file (docs/data-formats.md) (extra columns after the required ones, in ``table.extra`` order)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     extras = list(table.extra)

@@ -21,7 +21,7 @@ flight, reason and the likely fix; exit status 2 from the command line). The che
 4. **Speed.** The centre's speed, from quadratic fits of the per-frame rigid poses (Kabsch) over
    windows of :data:`WINDOW_S` = 0.15 s, must stay below :data:`MAX_SPEED_M_S` = 60 m/s (the fastest
    throws reach about 40 m/s).
-5. **Gravity along −z.** Under the flight model (SPEC §2) the aerodynamic acceleration A = a − G (a the
+5. **Gravity along −z.** Under the flight model (docs/conventions.md) the aerodynamic acceleration A = a − G (a the
    centre's acceleration, G = −g ẑ) lies in the plane of the velocity v and the disc normal n: lift is
    perpendicular to v in that plane, drag along −v. Hence, in still air, A has no component along
    e = n × v / |n × v| and no component along +v (air cannot push the disc forward). The score
@@ -36,7 +36,7 @@ flight, reason and the likely fix; exit status 2 from the command line). The che
    acceleration ≈ −g" is not used: lift exceeds the weight in a fast throw (a_z ≈ +0.9 g at release for 14 m/s and α = 7°), so a level glide has
    a_z ≈ 0 just like the lateral axis of a y-up export. Limitation: gravity along the *downrange* axis
    is lateral to nothing and, with strong drag, may pass; the least-squares RMS check
-   (:func:`bayes_disc.inference.fit_checks.check_fit_plausible`) stops such data before sampling.
+   (:func:`bayes_disc.inference.fitting.fit_checks.check_fit_plausible`) stops such data before sampling.
    Flights with fewer than :data:`MIN_WINDOWS` windows are not checked for gravity.
 
 Inertial data are not checked here yet.
@@ -206,8 +206,8 @@ FIXES = {
           "new y to stay right-handed (x, y, z) → (x, −z, y)",
     "+y": "the vertical axis is y pointing down: swap the y and z columns and negate the new z, "
           "(x, y, z) → (x, z, −y)",
-    "-x": "the vertical axis is x: rotate the data so that z points up (SPEC §1)",
-    "+x": "the vertical axis is x pointing down: rotate the data so that z points up (SPEC §1)",
+    "-x": "the vertical axis is x: rotate the data so that z points up (docs/conventions.md)",
+    "+x": "the vertical axis is x pointing down: rotate the data so that z points up (docs/conventions.md)",
     "+z": "z points down: negate z and y to stay right-handed, (x, y, z) → (x, −y, −z)",
 }
 
@@ -229,11 +229,11 @@ def check_interval(obs: FlightObservation) -> None:
     if MIN_INTERVAL_S <= dt <= MAX_INTERVAL_S:
         return
     if 1.0 <= dt < 100.0:
-        why = f"time looks like milliseconds ({1e3 / dt:.0f} Hz if so): give seconds (SPEC §4)"
+        why = f"time looks like milliseconds ({1e3 / dt:.0f} Hz if so): give seconds (docs/data-formats.md)"
     elif dt >= 100.0:
-        why = f"time looks like microseconds ({1e6 / dt:.0f} Hz if so): give seconds (SPEC §4)"
+        why = f"time looks like microseconds ({1e6 / dt:.0f} Hz if so): give seconds (docs/data-formats.md)"
     else:
-        why = "check the unit of the time column: SPEC §4 wants seconds"
+        why = "check the unit of the time column: docs/data-formats.md asks for seconds"
     raise ImplausibleDataError(obs, f"median sample interval {dt:.4g} s is outside [{MIN_INTERVAL_S:g}, "
                                f"{MAX_INTERVAL_S:g}] s (10 Hz to 10 kHz): {why}")
 
@@ -288,7 +288,8 @@ def check_gravity(obs: FlightObservation, kin: Kinematics, g: float) -> None:
     if not np.isfinite(s) or s <= MAX_GRAVITY_SCORE * g:
         return
     best = min((k for k in scores if k != "-z" and np.isfinite(scores[k])), key=scores.get, default=None)
-    msg = (f"the accelerations do not fit gravity along −z (SPEC §1: z up): the aerodynamic force would need "
+    msg = (f"the accelerations do not fit gravity along −z (docs/conventions.md: z up): the aerodynamic force "
+           f"would need "
            f"{s / g:.2f} g along the disc's side or pushing it forward (a disc's is near 0)")
     if best is not None and scores[best] <= MAX_GRAVITY_SCORE * g and scores[best] < 0.5 * s:
         msg += f"; with gravity along {best} it would be {scores[best] / g:.2f} g: {FIXES[best]}"

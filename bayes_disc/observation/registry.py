@@ -1,6 +1,6 @@
 """One registry of the model's pluggable units: physics terms, data explanations and observation models.
 
-Every unit has an id (the SPEC id where one exists), a kind, a title, its equations and its parameters.
+Every unit has an id (the one the configuration uses), a kind, a title, its equations and its parameters.
 Physics terms (:mod:`bayes_disc.physics.terms`) change the flight; data explanations
 (:mod:`.explanations`) change how recordings relate to the flight; observation models (:mod:`.models`)
 predict one kind of recording. Config readers, synth, the parameter layout, the missing-physics search and

@@ -11,7 +11,7 @@ recordings whose markers sit elsewhere on the disc or are recorded at shifted ti
 forms of physics that no formula of the library has (:mod:`bayes_disc.physics.nature`: a ground effect
 with another decay law, the wind-tunnel table's α-dependence, a power-law wind shear, a saturating side
 force), to see what ``diagnose`` makes of effects that do not follow the library's formulas.
-Output: a SPEC §4 marker file and a truth JSON (coefficients, terms, initial states, noise).
+Output: a marker file (docs/data-formats.md) and a truth JSON (coefficients, terms, initial states, noise).
 
 An ``imu:`` block adds what an inertial logger fixed in the disc records during the same flights
 (:mod:`.inertial_synth`): sensor position ``offset`` [m], accelerometer filter ``lpf_tau`` [s], ``tilt``
@@ -26,68 +26,21 @@ and each throw's release row.
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from ..physics import (COEFFICIENT_NAMES, LITERATURE, Coefficients, Disc, Environment, Trajectories, get_terms,
-                       literature_coefficients, simulate)
+from ..physics import Coefficients, Disc, Environment, Trajectories, get_terms, literature_coefficients, simulate
 from ..physics.conditions import flight_conditions
 from ..physics.nature import get_nature
 from ..physics.frames import (attitude_from_yaw_pitch_roll, omega_body_from_pqr,
                               quat_to_matrix)
-from .config_blocks import read_disc_env, read_markers, read_nature, read_physics  # noqa: F401 (moved; imported back)
-from .config_io import ConfigError, Section, load_yaml
 from .registry import split_extensions
 from .markers import FlightObservation, table_from_flights, write_marker_csv
 from .imu.formats import InertialLog, write_flatball_ins, write_imu_csv
 from .inertial_synth import LoggerSpec, recorded_throw, synthetic_log
-
-#: kinds of data defect (``defects:`` keys)
-DEFECT_KINDS = ("outliers", "swaps", "ar1", "sigma_m")
-
-
-@dataclass(frozen=True)
-class Defects:
-    """Data defects of one synthetic flight (module docstring); the defaults are off.
-
-    Attributes
-    ----------
-    outlier_fraction : float
-        Fraction of the observed points made gross outliers.
-    outlier_size_m : tuple of float
-        (low, high) displacement of an outlier [m]; the size is uniform in it, the direction uniform on
-        the sphere.
-    swap_frames : int
-        Number of frames (sample times) in which two markers' labels are exchanged.
-    swap_fraction : float
-        Fraction of the frames with a swap (added to ``swap_frames``: ``round(fraction · n_frames)``).
-    ar1_rho : float
-        AR(1) coefficient ρ of the marker noise between consecutive samples (0: white noise).
-    sigma_fraction : float
-        Fraction of the flight's samples with ``sigma_factor`` × the noise.
-    sigma_factor : float
-        Noise multiplier k of those samples.
-    sigma_where : str
-        ``segment`` (one contiguous block of samples, all markers) or ``random`` (random points).
-    """
-
-    outlier_fraction: float = 0.0
-    outlier_size_m: tuple = (0.02, 0.06)
-    swap_frames: int = 0
-    swap_fraction: float = 0.0
-    ar1_rho: float = 0.0
-    sigma_fraction: float = 0.0
-    sigma_factor: float = 1.0
-    sigma_where: str = "segment"
-    per_point_sigma: bool = False   # write a sigma_m column (set when any sigma_m block is given)
-
-    @property
-    def any(self) -> bool:
-        """Whether the flight has any defect (or a sigma_m column)."""
-        return (self.outlier_fraction > 0 or self.swap_frames > 0 or self.swap_fraction > 0 or self.ar1_rho != 0
-                or self.per_point_sigma)
+from .synth_defects import Defects, ar1_noise, inject_outliers, point_sigmas, swap_labels
 
 
 DEFAULT_MARKERS = {"0": [0.100, 0.000, -0.015], "1": [-0.0308, 0.0846, -0.015], "2": [-0.0707, -0.0778, -0.015]}
@@ -267,141 +220,6 @@ def _recorded_markers(spec: SynthSpec, f: LaunchSpec, y0, times, mb, terms, ext,
     return out
 
 
-# ------------------------------------------------------------------------------------------- defects
-def ar1_noise(z: np.ndarray, rho: float) -> np.ndarray:
-    """Unit-variance AR(1) noise along the first axis from white standard normals.
-
-    e_0 = z_0, e_t = ρ e_{t−1} + √(1−ρ²) z_t: stationary from the first sample, Var e_t = 1,
-    Corr(e_t, e_{t+k}) = ρ^k.
-
-    Parameters
-    ----------
-    z : ndarray, shape (n, ...)
-        White N(0, 1) draws; axis 0 is time (one sample interval per step).
-    rho : float
-        AR(1) coefficient, |ρ| < 1 (0 returns ``z`` itself).
-
-    Returns
-    -------
-    ndarray, shape of ``z``
-    """
-    if rho == 0.0:
-        return z
-    e = np.empty_like(z)
-    e[0] = z[0]
-    c = np.sqrt(1.0 - rho * rho)
-    for t in range(1, z.shape[0]):
-        e[t] = rho * e[t - 1] + c * z[t]
-    return e
-
-
-def point_sigmas(n: int, n_markers: int, sigma: float, d: Defects, rng: np.random.Generator):
-    """Every point's noise sd: ``sigma`` [m], times ``d.sigma_factor`` on a fraction of the samples.
-
-    Parameters
-    ----------
-    n, n_markers : int
-        Samples and markers of the flight.
-    sigma : float
-        The flight's noise sd [m].
-    d : Defects
-        ``sigma_fraction`` of the samples (``segment``: one contiguous block of all markers, at a uniformly
-        random place; ``random``: random points) get ``sigma_factor`` × ``sigma``.
-    rng : numpy.random.Generator
-
-    Returns
-    -------
-    sig : ndarray, shape (n, n_markers)
-        Point sds [m].
-    truth : dict
-        fraction, factor, where, and the points with the larger noise (``t_range_s`` index range for a
-        segment, ``n_points``).
-    """
-    sig = np.full((n, n_markers), sigma)
-    truth = {"fraction": d.sigma_fraction, "factor": d.sigma_factor, "where": d.sigma_where}
-    if d.sigma_fraction <= 0.0:
-        truth["n_points"] = 0
-        return sig, truth
-    if d.sigma_where == "segment":
-        m = int(round(d.sigma_fraction * n))
-        start = int(rng.integers(0, n - m + 1))
-        sig[start:start + m] *= d.sigma_factor
-        truth["samples"] = [start, start + m]
-        truth["n_points"] = m * n_markers
-    else:
-        hit = rng.random((n, n_markers)) < d.sigma_fraction
-        sig[hit] *= d.sigma_factor
-        truth["n_points"] = int(hit.sum())
-    return sig, truth
-
-
-def swap_labels(pos: np.ndarray, sig: np.ndarray | None, d: Defects, rng: np.random.Generator) -> list:
-    """Exchange two observed markers' labels in randomly chosen frames (in place).
-
-    Parameters
-    ----------
-    pos : ndarray, shape (n, n_markers, 3)
-        Recorded positions [m], NaN where missing; modified.
-    sig : ndarray, shape (n, n_markers), or None
-        Point sds [m], exchanged with the positions; modified.
-    d : Defects
-        ``swap_frames`` + round(``swap_fraction`` · n) frames, among those with ≥ 2 observed markers.
-    rng : numpy.random.Generator
-
-    Returns
-    -------
-    list of (frame, marker a, marker b)
-        Indices of every swapped frame and its two markers, in time order.
-    """
-    observed = np.all(np.isfinite(pos), axis=-1)
-    eligible = np.flatnonzero(observed.sum(axis=1) >= 2)
-    want = d.swap_frames + int(round(d.swap_fraction * pos.shape[0]))
-    if want > eligible.size:
-        raise ValueError(f"{want} label swaps asked for but only {eligible.size} frames have two markers")
-    out = []
-    for i in np.sort(rng.choice(eligible, size=want, replace=False)):
-        a, b = np.sort(rng.choice(np.flatnonzero(observed[i]), size=2, replace=False))
-        pos[i, [a, b]] = pos[i, [b, a]]
-        if sig is not None:
-            sig[i, [a, b]] = sig[i, [b, a]]
-        out.append((int(i), int(a), int(b)))
-    return out
-
-
-def inject_outliers(pos: np.ndarray, d: Defects, rng: np.random.Generator) -> list:
-    """Displace a fraction of the observed points by a gross error (in place).
-
-    Each chosen point moves by s·u, s ~ U(``outlier_size_m``) [m], u uniform on the unit sphere.
-
-    Parameters
-    ----------
-    pos : ndarray, shape (n, n_markers, 3)
-        Recorded positions [m], NaN where missing; modified.
-    d : Defects
-        ``outlier_fraction`` of the observed points (rounded) become outliers.
-    rng : numpy.random.Generator
-
-    Returns
-    -------
-    list of (frame, marker, offset)
-        Index of each outlier's frame and marker and its displacement [m] (list of 3), in time order.
-    """
-    obs = np.argwhere(np.all(np.isfinite(pos), axis=-1))
-    m = int(round(d.outlier_fraction * len(obs)))
-    if m == 0:
-        return []
-    chosen = obs[np.sort(rng.choice(len(obs), size=m, replace=False))]
-    u = rng.normal(size=(m, 3))
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    size = rng.uniform(d.outlier_size_m[0], d.outlier_size_m[1], size=m)
-    out = []
-    for (i, k), uj, sj in zip(chosen, u, size):
-        off = uj * sj
-        pos[i, k] += off
-        out.append((int(i), int(k), off.tolist()))
-    return out
-
-
 @dataclass
 class SynthResult:
     """Synthetic data: marker flights, the truth, and the inertial logs (when the spec has a logger).
@@ -563,7 +381,7 @@ def write_synth(result: SynthResult, markers_path, truth_path) -> None:
     result : SynthResult
         From :func:`synthesize`.
     markers_path, truth_path : str or Path
-        Marker CSV (SPEC §4) and truth JSON; the inertial logs go where ``result.imu.output`` says
+        Marker CSV (docs/data-formats.md) and truth JSON; the inertial logs go where ``result.imu.output`` says
         (flatball-ins: ``<output>/<flight>.csv``, one per flight; imu-csv: one file).
     """
     write_marker_csv(markers_path, table_from_flights(result.flights))
@@ -579,211 +397,3 @@ def write_synth(result: SynthResult, markers_path, truth_path) -> None:
     else:
         out.parent.mkdir(parents=True, exist_ok=True)
         write_imu_csv(out, result.imu_logs)
-
-
-# ------------------------------------------------------------------------------------------------------
-def _coefficients(path, sec: Section) -> Coefficients:
-    raw = sec.raw("coefficients", "hummel2002")
-    if isinstance(raw, str):
-        if raw not in LITERATURE:
-            raise ConfigError(path, "coefficients", f"unknown set {raw!r}; known: {sorted(LITERATURE)}")
-        return literature_coefficients(raw)
-    base = literature_coefficients("hummel2002").as_dict()
-    c = Section(path, raw, "coefficients")
-    for n in COEFFICIENT_NAMES:
-        base[n] = c.number(n, base[n])
-    c.finish()
-    return Coefficients.from_mapping(base)
-
-
-def _gust(path, f: Section) -> tuple | None:
-    g = f.section("gust")
-    if not g.data:
-        return None
-    t0 = g.number("t_start", required=True, nonnegative=True)
-    t1 = g.number("t_end", required=True, positive=True)
-    w = g.vector("wind", 3, required=True)
-    g.finish()
-    if t1 <= t0:
-        raise ConfigError(path, g.key("t_end"), "must be after t_start")
-    return (t0, t1, *w)
-
-
-def _pair(path, sec: Section, name: str, default) -> tuple:
-    v = sec.vector(name, 2, list(default))
-    if min(v) < 0:
-        raise ConfigError(path, sec.key(name), f"noise sds must not be negative, got {v}")
-    return tuple(v)
-
-
-def _logger_values(path, sec: Section, base: LoggerSpec, keys) -> LoggerSpec:
-    """LoggerSpec ``base`` with the ``keys`` given in ``sec`` replaced."""
-    vals = {}
-    readers = {
-        "offset": lambda: tuple(sec.vector("offset", 3, list(base.offset))),
-        "lpf_tau": lambda: sec.number("lpf_tau", base.lpf_tau, positive=True),
-        "tilt": lambda: tuple(sec.vector("tilt", 2, list(base.tilt))),
-        "period": lambda: sec.number("period", base.period, positive=True, maximum=1.0),
-        "gyro_noise": lambda: _pair(path, sec, "gyro_noise", base.gyro_noise),
-        "acc_noise": lambda: _pair(path, sec, "acc_noise", base.acc_noise),
-        "gyro_bias": lambda: tuple(sec.vector("gyro_bias", 3, list(base.gyro_bias))),
-        "acc_bias": lambda: tuple(sec.vector("acc_bias", 3, list(base.acc_bias))),
-        "lpf_state": lambda: (None if sec.raw("lpf_state", None) is None
-                              else tuple(sec.vector("lpf_state", 3))),
-        "field_uT": lambda: tuple(sec.vector("field_uT", 3, list(base.field_uT))),
-    }
-    for k in keys:
-        vals[k] = readers[k]()
-    return replace(base, **vals)
-
-
-def _read_imu_block(path, sec: Section, name: str, raw_flights: list) -> ImuSynth | None:
-    """The ``imu:`` block (logger, format, output) and each flight's own ``imu:`` (overrides or false)."""
-    if not sec.has("imu"):
-        return None
-    s = sec.section("imu")
-    logger = _logger_values(path, s, LoggerSpec(), ("offset", "lpf_tau", "tilt", "period", "gyro_noise",
-                                                   "acc_noise", "gyro_bias", "acc_bias", "lpf_state", "field_uT"))
-    fmt = s.string("format", "flatball-ins", choices=("flatball-ins", "imu-csv"))
-    default_out = f"{name}_imu" if fmt == "flatball-ins" else f"{name}_imu.csv"
-    output = path.parent / s.string("output", default_out)
-    rest_before = s.number("rest_before", 1.0, nonnegative=True)
-    rest_after = s.number("rest_after", 0.3, nonnegative=True)
-    first_row = s.number("first_row", 0, integer=True, nonnegative=True)
-    s.finish()
-    flights = {}
-    for i, rf in enumerate(raw_flights):
-        fname = rf.get("name", f"flight{i + 1}") if isinstance(rf, dict) else None
-        own = rf.get("imu", {}) if isinstance(rf, dict) else {}
-        if own is False:
-            continue
-        f = Section(path, own, f"flights[{i}].imu")
-        flights[fname] = _logger_values(path, f, logger, PER_THROW_KEYS)
-        f.finish()
-    return ImuSynth(logger=logger, format=fmt, output=output, rest_before=rest_before, rest_after=rest_after,
-                    first_row=first_row, flights=flights)
-
-
-def _read_defects(path, sec: Section) -> dict:
-    """The kinds given in a ``defects:`` block, as :class:`Defects` field values (``sec``: the block)."""
-    vals = {}
-    unknown = [k for k in sec.data if k not in DEFECT_KINDS]
-    if unknown:
-        raise ConfigError(path, sec.key(str(unknown[0])), f"unknown defect; known: {list(DEFECT_KINDS)}")
-    if sec.has("outliers"):
-        o = sec.section("outliers")
-        size = o.vector("size_m", 2, [0.02, 0.06])
-        if not 0 < size[0] <= size[1]:
-            raise ConfigError(path, o.key("size_m"), f"must be [low, high] with 0 < low ≤ high (m), got {size}")
-        vals.update(outlier_fraction=o.number("fraction", required=True, minimum=0.0, maximum=0.5),
-                    outlier_size_m=tuple(size))
-        o.finish()
-    if sec.has("swaps"):
-        w = sec.section("swaps")
-        vals.update(swap_frames=w.number("frames", 0, integer=True, nonnegative=True),
-                    swap_fraction=w.number("fraction", 0.0, minimum=0.0, maximum=0.5))
-        w.finish()
-    if sec.has("ar1"):
-        a = sec.section("ar1")
-        rho = a.number("rho", required=True)
-        if not -1.0 < rho < 1.0:
-            raise ConfigError(path, a.key("rho"), f"must be in (−1, 1), got {rho!r}")
-        vals["ar1_rho"] = rho
-        a.finish()
-    if sec.has("sigma_m"):
-        g = sec.section("sigma_m")
-        vals.update(sigma_fraction=g.number("fraction", 0.0, minimum=0.0, maximum=1.0),
-                    sigma_factor=g.number("factor", 1.0, positive=True),
-                    sigma_where=g.string("where", "segment", choices=("segment", "random")),
-                    per_point_sigma=True)
-        g.finish()
-    for k in DEFECT_KINDS:
-        sec.used.add(k)
-    return vals
-
-
-def load_synth_spec(path) -> tuple[SynthSpec, Path, Path]:
-    """Read SYNTH.yaml; returns the spec and the marker/truth output paths (relative to the file)."""
-    path = Path(path)
-    return synth_spec_from_mapping(load_yaml(path), path)
-
-
-def synth_spec_from_mapping(data: dict, path) -> tuple[SynthSpec, Path, Path]:
-    """A synthetic data set from a SYNTH.yaml mapping already read.
-
-    Parameters
-    ----------
-    data : dict
-        The mapping (keys as SYNTH.yaml: docs/configuration.md).
-    path : str or Path
-        The file it stands for: named in errors; relative output paths resolve against its folder.
-
-    Returns
-    -------
-    spec : SynthSpec
-    markers_path, truth_path : Path
-        Where ``write_synth`` puts the marker file and the truth JSON.
-
-    Raises
-    ------
-    ConfigError
-        For a bad or unknown key, naming it.
-    """
-    path = Path(path)
-    sec = Section(path, data)
-    name = sec.string("name", required=True)
-    seed = sec.number("seed", 0, integer=True, nonnegative=True)
-    rate = sec.number("sample_rate_hz", 120.0, positive=True)
-    coef = _coefficients(path, sec)
-    disc, env = read_disc_env(path, sec)
-    markers = read_markers(path, sec, DEFAULT_MARKERS)
-    physics = read_physics(path, sec, marker_ids=tuple(markers))
-    nature = read_nature(path, sec)
-    out = sec.section("output")
-    markers_path = path.parent / out.string("markers", f"{name}_markers.csv")
-    truth_path = path.parent / out.string("truth", f"{name}_truth.json")
-    out.finish()
-    raw_flights = sec.raw("flights", required=True)
-    if not isinstance(raw_flights, list) or not raw_flights:
-        raise ConfigError(path, "flights", "must be a non-empty list")
-    imu = _read_imu_block(path, sec, name, raw_flights)
-    common_defects = _read_defects(path, sec.section("defects"))
-    flights = []
-    for i, rf in enumerate(raw_flights):
-        f = Section(path, rf, f"flights[{i}]")
-        if imu is not None:
-            f.raw("imu")                                   # read above, with the logger
-        elif f.has("imu"):
-            raise ConfigError(path, f.key("imu"), "a flight's imu needs the top-level imu block (the logger)")
-        pitch = f.number("pitch_deg", None, minimum=-90, maximum=90)
-        alpha = f.number("alpha_deg", None, minimum=-90, maximum=90)
-        if pitch is not None and alpha is not None:
-            raise ConfigError(path, f.key("alpha_deg"), "give pitch_deg or alpha_deg, not both")
-        flights.append(LaunchSpec(
-            name=f.string("name", f"flight{i + 1}"),
-            speed=f.number("speed", required=True, positive=True),
-            launch_angle_deg=f.number("launch_angle_deg", 0.0, minimum=-90, maximum=90),
-            heading_deg=f.number("heading_deg", 0.0),
-            position=tuple(f.vector("position", 3, [0.0, 0.0, 1.0])),
-            pitch_deg=pitch, alpha_deg=alpha if pitch is None else None,
-            roll_deg=f.number("roll_deg", 0.0, minimum=-90, maximum=90),
-            spin=f.number("spin", 60.0), p=f.number("p", 0.0), q=f.number("q", 0.0),
-            duration=f.number("duration", 1.0, positive=True),
-            noise_mm=f.number("noise_mm", 2.0, nonnegative=True),
-            dropout=f.number("dropout", 0.0, minimum=0.0, maximum=0.9),
-            gust=_gust(path, f),
-            defects=Defects(**{**common_defects, **_read_defects(path, f.section("defects"))}),
-        ))
-        f.finish()
-    names = [f.name for f in flights]
-    if len(set(names)) != len(names):
-        raise ConfigError(path, "flights", f"flight names repeat: {names}")
-    if imu is not None:
-        for i, f in enumerate(flights):
-            if f.gust is not None and f.name in imu.flights:
-                raise ConfigError(path, f"flights[{i}].gust", "a gust cannot be recorded by the inertial logger "
-                                  "(give this flight `imu: false`)")
-    sec.finish()
-    spec = SynthSpec(name=name, flights=tuple(flights), coefficients=coef, disc=disc, env=env, markers=markers,
-                     physics=physics, nature=nature, sample_rate_hz=rate, seed=seed, imu=imu)
-    return spec, markers_path, truth_path

@@ -1,4 +1,5 @@
-"""Marker data given in memory (a pandas DataFrame or a mapping of arrays) instead of a SPEC §4 file.
+"""Marker data given in memory (a pandas DataFrame or a mapping of arrays) instead of a marker file
+(docs/data-formats.md).
 
 The columns are those of a marker file — ``flight, t, marker, x, y, z`` (extra numeric columns allowed,
 e.g. ``sigma_m``) — one row per marker per sample, world-frame positions in metres, time in seconds. The
@@ -80,8 +81,8 @@ def marker_table_from_columns(columns, marker_ids=None, source: str = "<table>")
     Raises
     ------
     MarkerFileError
-        For any row or flight that a SPEC §4 file would be rejected for; the message names ``source``
-        and the row.
+        For any row or flight that a marker file (docs/data-formats.md) would be rejected for; the message names
+        ``source`` and the row.
     TypeError
         If ``columns`` is neither a DataFrame nor a mapping.
     """

@@ -1,4 +1,4 @@
-"""Flight conditions along simulated trajectories, air-relative as the model sees them (SPEC §1).
+"""Flight conditions along simulated trajectories, air-relative as the model sees them (docs/conventions.md).
 
 One definition of the air-relative velocity, the D frame, the angle of attack and the rates p, q, r
 for every caller (diagnostics, report, synthetic data): the wind of the model's terms (their ``air``

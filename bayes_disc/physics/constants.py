@@ -1,4 +1,4 @@
-"""Disc constants, environment and the ten aerodynamic coefficients (SPEC §2).
+"""Disc constants, environment and the ten aerodynamic coefficients (docs/conventions.md).
 
 Symbols follow Hummel & Hubbard (2002), Table 1 and Table 2.
 """
@@ -57,7 +57,7 @@ class Environment:
 
 @dataclass(frozen=True)
 class Coefficients:
-    """The ten aerodynamic coefficients of SPEC §2 (rates in rad/s, dimensional as in the paper).
+    """The ten aerodynamic coefficients of docs/conventions.md (rates in rad/s, dimensional as in the paper).
 
     Lift      L = (CL0 + CLa·α) Q A
     Drag      D = (CD0 + CDa·α²) Q A

@@ -137,9 +137,9 @@ PROBE_SPEED = 10.0
 
 def probe_context(z: float, alpha: float, mu: float, disc, rho: float = 1.23) -> np.ndarray:
     """A flight context (:mod:`.terms`) at height z [m], angle of attack α [rad] and advance ratio μ, in level
-    flight along world x: D frame d1 = x, d3 = −z (the disc normal of SPEC §1, down for a disc flying upright),
-    d2 = d3 × d1 = −y; v_a = V (cos α d1 + sin α d3), V = :data:`PROBE_SPEED` (α = atan2(v_a·d3, v_a·d1));
-    r = 2 μ V / d."""
+    flight along world x: D frame d1 = x, d3 = −z (the disc normal of docs/conventions.md, down for a disc flying
+    upright), d2 = d3 × d1 = −y; v_a = V (cos α d1 + sin α d3), V = :data:`PROBE_SPEED`
+    (α = atan2(v_a·d3, v_a·d1)); r = 2 μ V / d."""
     from .terms import (CTX_AREA, CTX_DIAM, CTX_MASS, CTX_Q, CTX_R, CTX_RHO, CTX_SPEED, CTX_VAX, CTX_VAZ, CTX_ALPHA,
                         CTX_D1X, CTX_D2Y, CTX_D3Z, CTX_Z)
     ctx = np.zeros(26)

@@ -1,4 +1,4 @@
-"""Newton–Euler equations of the spinning disc (SPEC §2, Hummel & Hubbard 2002 eqs. 1–2).
+"""Newton–Euler equations of the spinning disc (docs/conventions.md, Hummel & Hubbard 2002 eqs. 1–2).
 
 Readable numpy reference of the model; the compiled simulator (:mod:`bayes_disc.physics.kernel`)
 implements the same equations for batches and is tested against this module.
@@ -32,7 +32,7 @@ class Loads:
 
 def aerodynamic_loads(y, coefficients: Coefficients, disc: Disc, env: Environment,
                       terms=(), extension=None, t: float = 0.0) -> Loads:
-    """Forces and moments of SPEC §2 (plus any extra ``terms`` with parameters ``extension``)."""
+    """Forces and moments of docs/conventions.md (plus any extra ``terms`` with parameters ``extension``)."""
     c = coefficients
     extension = np.zeros(0) if extension is None else np.asarray(extension, dtype=float)
     E = extension.reshape(-1, 1)

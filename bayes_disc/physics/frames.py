@@ -1,4 +1,4 @@
-"""Frames of SPEC §1: quaternions (w, x, y, z) mapping body to world, and the velocity-aligned frame D.
+"""Frames (docs/conventions.md): quaternions (w, x, y, z) mapping body to world, and the velocity-aligned frame D.
 
 World W: x downrange, y left, z up. Body B: b3 is the symmetry axis out of the underside.
 D frame (Hummel & Hubbard): d3 = b3, d1 = unit projection of the air-relative velocity on the disc

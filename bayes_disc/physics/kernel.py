@@ -45,7 +45,7 @@ parameter-independent schedule (results smooth in the parameters), and lanes who
 rate_margin · fixed_rate are flagged. The step count is per lane (not shared with other lanes).
 
 The default c = 1.7 gives one Verner step per 120-Hz sample up to ω_c ≈ 204 rad/s (spin r ≈ 105 rad/s).
-Marker errors measured when this was written: ≤ 1e-7 m on the four SPEC reference cases (reported by
+Marker errors measured when this was written: ≤ 1e-7 m on the four reference cases of ``shared/reference`` (reported by
 ``benchmarks/bench_simulator.py``); 0.6–2.4e-6 m over 2 s for r = 100 rad/s throws with wobble rates up
 to 25 rad/s, against a DOP853 run at c = 0.3. (Butcher's rk6 needs two substeps per 120-Hz sample to
 stay below 1e-6 m on the reference cases: 14 right-hand sides per sample instead of 9.)

@@ -1,4 +1,4 @@
-"""Extra physics terms that plug into the flight model of SPEC §2.
+"""Extra physics terms that plug into the flight model of docs/conventions.md.
 
 A term is one small, self-describing unit: its equations (docstring), its extra parameters with units,
 defaults and prior scales, and one or two compiled hooks that the simulator inlines into its
@@ -55,7 +55,7 @@ class TermParameter:
 
 @dataclass(frozen=True)
 class Term:
-    """A physics term: SPEC id, a one-line title, its equations and its compiled hooks.
+    """A physics term: id, a one-line title, its equations and its compiled hooks.
 
     A term is a *family* when some of its parameters change the shape of the effect rather than its size
     (a decay height, a shear, an exponent, higher powers of α): at their off values the family is the
@@ -111,7 +111,7 @@ def _unit_air(ctx):
 
 @nb.njit(inline="always", cache=True)
 def _lift_direction(ctx):
-    """d2 × v̂_a (world): the lift direction of SPEC §2 (perpendicular to v_a, toward the top side)."""
+    """d2 × v̂_a (world): the lift direction of docs/conventions.md (perpendicular to v_a, toward the top side)."""
     ax, ay, az = _unit_air(ctx)
     d2x, d2y, d2z = ctx[CTX_D2X], ctx[CTX_D2Y], ctx[CTX_D2Z]
     return d2y * az - d2z * ay, d2z * ax - d2x * az, d2x * ay - d2y * ax
@@ -291,6 +291,6 @@ def select_terms(registry: dict, ids, what: str = "physics term") -> tuple[Term,
 
 
 def get_terms(ids) -> tuple[Term, ...]:
-    """Terms by SPEC id (:data:`TERMS`), in the order given (:func:`select_terms`)."""
+    """Terms by id (:data:`TERMS`), in the order given (:func:`select_terms`)."""
     return select_terms(TERMS, ids)
 

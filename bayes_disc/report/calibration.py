@@ -76,7 +76,7 @@ def calibration_sections(result: dict, figures_dir: Path) -> list[Section]:
     """The page's sections: summary table, rank histograms, coverage."""
     n, b = result["replicates"], result["rank_bins"]
     bands = result["coverage_band_95"]
-    family = result.get("coverage_band_familywise_95")     # absent from campaigns summarised before stop 31
+    family = result.get("coverage_band_familywise_95")     # absent from campaign summaries of older versions
     rows = []
     for name, c in result["coefficients"].items():
         row = [name]

@@ -5,9 +5,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..inference.layout import IC_NAMES as IC_ORDER
-from ..inference.leastsq import noise_text
-from ..inference.versions import software_versions
+from ..inference.model.layout import IC_NAMES as IC_ORDER
+from ..inference.fitting.leastsq import noise_text
+from ..inference.results.versions import software_versions
 from ..observation.models.inertial import SERIES as INERTIAL_SERIES, SERIES_UNITS as INERTIAL_UNITS
 from ..observation.models.markers import ROTATIONS
 from ..physics import TERMS, Disc
@@ -45,7 +45,7 @@ def _prior_table(prior: dict) -> dict:
     ``mean``/``sd``, or for runs written before they were recorded, the named set); empty if unknown."""
     if "mean" in prior and "sd" in prior:
         return {k: (prior["mean"][k], prior["sd"][k]) for k in prior["mean"]}
-    from ..inference.priors import coefficient_prior
+    from ..inference.model.priors import coefficient_prior
     try:
         cp = coefficient_prior(prior["name"])
     except KeyError:
@@ -175,7 +175,7 @@ def coefficient_table(ctx) -> Section:
         rows.append(row)
     coef_html = table(heads, rows, "num")
     # per-flight quantities: noise scales, initial conditions, the flight's own observation-model parameters
-    from ..inference.results import flight_entries
+    from ..inference.results.draws import flight_entries
     flights = ctx.flight_names
     problem = ctx.problem
     where = {}

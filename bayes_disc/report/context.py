@@ -85,7 +85,8 @@ def load_run(run_dir) -> RunData:
     pp = run_dir / "posterior.nc"
     if not pp.is_file():
         raise ReportInputError(pp, "file not found (is this a `bayes-disc sample` output folder?)")
-    from ..inference.results import has_parameter, load_posterior
+    from ..inference.results.draws import has_parameter
+    from ..inference.results.posterior_file import load_posterior
     try:
         # eager: a lazily opened file would stay open and block the next `sample` from rewriting it
         idata = load_posterior(pp, groups=("posterior", "sample_stats"))     # all the report reads
@@ -99,7 +100,7 @@ def load_run(run_dir) -> RunData:
     run_info = _read_json(run_dir / "run_info.json", required=False) or {}
     config_path = _find_config(run_dir, summary.get("config"))
     from ..observation.config_io import ConfigError
-    from ..inference.config import load_config
+    from ..inference.model.config import load_config
     try:
         cfg = load_config(config_path)
     except ConfigError as e:
@@ -162,27 +163,28 @@ class ReportContext:
     # -- model ------------------------------------------------------------------------------------------
     @cached_property
     def config(self):
-        from ..inference.config import load_config
+        from ..inference.model.config import load_config
         return load_config(self.run.config_path)
 
     @cached_property
     def problem(self):
-        from ..inference.data import build_problem
+        from ..inference.model.data import build_problem
         from ..observation.config_io import ConfigError
         from ..observation.markers import MarkerFileError
-        from ..inference.robust import with_saved_flags
+        from ..inference.fitting.robust import with_saved_flags
         try:
             problem = with_saved_flags(build_problem(self.config), self.run.run_dir)   # robust runs: cleaned data
         except (ConfigError, MarkerFileError, FileNotFoundError) as e:
             raise ReportInputError(self.run.config_path, f"cannot rebuild the run's data: {e}") from None
-        from ..inference.describe import flight_info
+        from ..inference.model.describe import flight_info
         strip = lambda d: {k: {a: b for a, b in v.items() if a != "file"} for k, v in d.items()}  # noqa: E731
         now, then = strip(flight_info(problem)), strip(self.summary["flights"])
         if now != then:
             changed = sorted(set(now) ^ set(then)) or sorted(k for k in now if now[k] != then[k])
             raise ReportInputError(self.run.config_path, f"flight data differ from the run's summary.json "
                                    f"(flight(s) {changed}): data or config changed since the run")
-        from ..inference.results import has_parameter, summary_names
+        from ..inference.results.draws import has_parameter
+        from ..inference.results.summary import summary_names
         missing = [n for n in summary_names(problem) if not has_parameter(self.run.idata.posterior, n)]
         if missing:
             raise ReportInputError(self.run.run_dir / "posterior.nc",
@@ -200,7 +202,7 @@ class ReportContext:
     # -- posterior --------------------------------------------------------------------------------------
     def posterior_array(self, names) -> np.ndarray:
         """(n_chain, n_draw, len(names)) posterior samples of summary.json parameter names."""
-        from ..inference.results import posterior_draws
+        from ..inference.results.draws import posterior_draws
         post = self.run.idata.posterior
         return np.stack([np.asarray(posterior_draws(post, n), float) for n in names], axis=-1)
 
@@ -214,7 +216,7 @@ class ReportContext:
         """Posterior samples at flat (chain-major) indices as θ rows (len, dim) in model order.
 
         Reads one parameter at a time, so the posterior is never copied as a whole."""
-        from ..inference.results import posterior_draws
+        from ..inference.results.draws import posterior_draws
         flat_index = np.asarray(flat_index, int)
         post = self.run.idata.posterior
         out = np.empty((flat_index.size, self.problem.dim))
@@ -248,7 +250,7 @@ class ReportContext:
     @cached_property
     def _sigma_sel(self) -> np.ndarray:
         """(1 + B, n_groups) noise scales of the reference and band draws (units of each group's data)."""
-        from ..inference.results import posterior_draws
+        from ..inference.results.draws import posterior_draws
         idx = np.r_[self.ref_index, self.band_indices]
         post = self.run.idata.posterior
         return np.stack([np.asarray(posterior_draws(post, n), float).reshape(-1)[idx]
@@ -384,7 +386,7 @@ class ReportContext:
             return None
         if abs(float(s.get("t", f.times[0])) - float(f.times[0])) > 1e-9:
             return None
-        from ..inference.truth import initial_state
+        from ..inference.model.truth import initial_state
         return self.problem.state_to_ic(initial_state(t, f.name), k)
 
     def truth_sigma(self, name: str) -> float | None:

@@ -1,4 +1,4 @@
-"""Video front end: multi-camera footage (or files of other digitising tools) → SPEC §4 marker tracks.
+"""Video front end: multi-camera footage (or files of other digitising tools) → marker tracks (docs/data-formats.md).
 
 Modules, one job each:
 

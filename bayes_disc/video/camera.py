@@ -1,6 +1,6 @@
 """Pinhole camera with OpenCV lens distortion.
 
-Conventions (OpenCV): a world point X (m, SPEC §1 world frame) has camera coordinates
+Conventions (OpenCV): a world point X (m, world frame of docs/conventions.md) has camera coordinates
 ``Xc = R X + t`` (camera x right, y down, z forward along the optical axis); the ideal normalised image
 point is ``x = (Xc/Zc, Yc/Zc)``; lens distortion maps it to ``x_d`` with the OpenCV model
 
@@ -180,10 +180,6 @@ class Camera:
     def undistort_pixels(self, uv) -> np.ndarray:
         """Pixels (..., 2) → ideal (undistorted) normalised coordinates (..., 2)."""
         return self.undistort_normalized(self.pixel_to_distorted(uv))
-
-    def undistort_to_pixels(self, uv) -> np.ndarray:
-        """Pixels (..., 2) → pixels of the same camera without distortion (..., 2)."""
-        return self.normalized_to_pixel(self.undistort_pixels(uv))
 
     def project(self, X) -> np.ndarray:
         """World points X (..., 3) [m] → pixels (..., 2), distortion applied (NaN behind the camera)."""

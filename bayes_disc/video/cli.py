@@ -1,6 +1,7 @@
 """Command-line subcommands ``track`` and ``render`` (registered into the main ``bayes-disc`` parser).
 
-``bayes-disc track TRACK.yaml [-o OUT.csv] [--quiet]`` — footage or imported points → SPEC §4 marker file.
+``bayes-disc track TRACK.yaml [-o OUT.csv] [--quiet]`` — footage or imported points → marker
+file (docs/data-formats.md).
 ``bayes-disc render RENDER.yaml [-o FOLDER] [--quiet]`` — synthetic footage, camera file and truth.
 
 Bad input raises :class:`~.errors.VideoInputError`; the main CLI prints it and exits with status 2.

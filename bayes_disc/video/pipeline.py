@@ -1,4 +1,4 @@
-"""``bayes-disc track TRACK.yaml``: footage (or imported points) + calibration → SPEC §4 marker file.
+"""``bayes-disc track TRACK.yaml``: footage (or imported points) + calibration → marker file (docs/data-formats.md).
 
 For every reference frame f (time t = t0 + f / fps) and every camera c, the camera's frame
 i = f − frame_offset_c is read, blobs are detected (full frame, or in windows around the predicted

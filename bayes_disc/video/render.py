@@ -1,6 +1,6 @@
 """Synthetic multi-camera footage of a simulated flight, with ground truth (``bayes-disc render``).
 
-The flight is simulated with :func:`bayes_disc.physics.simulate` (SPEC §2 model). Each camera is a
+The flight is simulated with :func:`bayes_disc.physics.simulate` (the model of docs/conventions.md). Each camera is a
 pinhole with OpenCV distortion (:mod:`.camera`). A marker of diameter d at depth Z images as a
 pixel-integrated Gaussian of standard deviation
 
@@ -267,7 +267,7 @@ class Renderer:
 
     # -- output ------------------------------------------------------------------------------------------
     def write_truth(self, path) -> None:
-        """SPEC §4 marker file of the true positions (every frame and marker) with ``n_cameras``: the
+        """Marker file (docs/data-formats.md) of the true positions (every frame and marker) with ``n_cameras``: the
         number of cameras that rendered the marker in that frame (recorded, not dropped, visible)."""
         spec = self.spec
         n_cam = self.seen.sum(axis=0)

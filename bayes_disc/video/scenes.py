@@ -11,8 +11,6 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
-import numpy as np
-
 from ..physics import literature_coefficients
 from ..physics.frames import attitude_from_yaw_pitch_roll
 from .camera import look_at
@@ -47,7 +45,3 @@ def standard_spec(seed: int = 2024, duration: float = 1.58, **imaging) -> Render
                        occlusion=True, min_view_elevation_deg=5.0)
     return RenderSpec(flight=standard_flight(duration), cameras=standard_rig(), markers=dict(DEFAULT_MARKERS),
                       imaging=replace(base, **imaging), fps=120.0, t0=0.0, seed=seed)
-
-
-def layout_array(markers=DEFAULT_MARKERS) -> np.ndarray:
-    return np.array([markers[k] for k in markers], float)

@@ -1,4 +1,4 @@
-"""Inertial recordings (SPEC §4b): reading, throw segmentation and the logging time base.
+"""Inertial recordings (docs/data-formats.md): reading, throw segmentation and the logging time base.
 
 - :mod:`.formats`: :func:`read_flatball_ins`, :func:`read_imu_csv`, :func:`write_imu_csv`,
   :func:`read_imu`, :class:`InertialLog`, :class:`ImuFileError`.

@@ -1,4 +1,4 @@
-"""Inertial log files (SPEC §4b): the flatball-ins logger CSVs and the ``imu-csv`` format.
+"""Inertial log files (docs/data-formats.md): the flatball-ins logger CSVs and the ``imu-csv`` format.
 
 Both readers return :class:`InertialLog` records in SI units and sensor axes:
 
@@ -8,7 +8,7 @@ Both readers return :class:`InertialLog` records in SI units and sensor axes:
   AHRS columns (``roll``, ``pitch``, ``yaw``, ``q*``, ``fe-*``, ``fl-*``, ``ahrs_*``) are its own
   estimates, not measurements, and are not returned.
 - ``imu-csv`` (``flight,t,gx,gy,gz,ax,ay,az``; rad/s, m/s², s): one log per flight, validated like
-  the marker files (SPEC §4): time increasing within a flight, NaN time rejected, line numbers in
+  the marker files (docs/data-formats.md): time increasing within a flight, NaN time rejected, line numbers in
   every error; extra numeric columns are kept in ``InertialLog.extra``.
 
 Unit conversions: accelerations logged in g are converted with the *standard* gravity
@@ -420,7 +420,7 @@ def repeated_sample_warnings(log: InertialLog) -> list[str]:
 # --------------------------------------------------------------------------------------------- imu-csv
 
 def read_imu_csv(path) -> list[InertialLog]:
-    """Read and validate an ``imu-csv`` file (SPEC §4b); one :class:`InertialLog` per flight.
+    """Read and validate an ``imu-csv`` file (docs/data-formats.md); one :class:`InertialLog` per flight.
 
     Header ``flight,t,gx,gy,gz,ax,ay,az`` required (extra columns allowed, kept in ``extra`` when
     numeric). Rejected with :class:`ImuFileError` naming file and line: a wrong field count, an empty
@@ -516,7 +516,7 @@ def read_imu_csv(path) -> list[InertialLog]:
 
 
 def write_imu_csv(path, logs) -> Path:
-    """Write logs with ``times`` as an ``imu-csv`` file (SPEC §4b), exactly (17 significant digits).
+    """Write logs with ``times`` as an ``imu-csv`` file (docs/data-formats.md), exactly (17 significant digits).
 
     Parameters
     ----------
@@ -558,7 +558,7 @@ def write_imu_csv(path, logs) -> Path:
 
 
 def read_imu(path, fmt: str) -> list[InertialLog]:
-    """Read an inertial file in the named format (SPEC §5 ``imu: [{file, format}]``).
+    """Read an inertial file in the named format (``imu: [{file, format}]``, docs/configuration.md).
 
     Parameters
     ----------

@@ -16,9 +16,9 @@ Criteria (each with its value kept in :class:`Segment` so a reader can judge the
    ``end`` is that row, exclusive: the free flight is rows ``release .. end - 1``.
 4. **Orientation**: the median in-flight specific force along sensor z. The aerodynamic normal
    force points up in flight; for a right-side-up disc up is −b3 and the sensor's +z points like b3
-   (SPEC §4b), so acc-z < 0; for a disc flown upside down it is > 0.
+   (docs/data-formats.md), so acc-z < 0; for a disc flown upside down it is > 0.
 
-Names follow SPEC §4b: ``<stem>`` for the first throw of a file, ``<stem>_2``, ``<stem>_3``… next.
+Names follow docs/data-formats.md: ``<stem>`` for the first throw of a file, ``<stem>_2``, ``<stem>_3``… next.
 """
 from __future__ import annotations
 
@@ -111,7 +111,7 @@ class Segment:
 
 
 def flight_names(stem: str, n: int) -> list[str]:
-    """SPEC §4b names of the ``n`` throws of a file: ``stem``, ``stem_2``, ``stem_3``…
+    """Names (docs/data-formats.md) of the ``n`` throws of a file: ``stem``, ``stem_2``, ``stem_3``…
 
     Parameters
     ----------

@@ -16,7 +16,7 @@ Residual series (diagnostics): the residuals r = measured − predicted [m] are 
 seen at each sample (r̄(t), standard error σ/√n_seen per component) and projected on two frames:
 
 * flight path: along-track t̂ = v̂, lateral ŝ = (ẑ × v̂)/|ẑ × v̂| (to the left), normal n̂ = t̂ × ŝ (up);
-* disc (velocity-aligned D frame of SPEC §1): d1, d2 (to the right), d3 = b3 (down through the disc).
+* disc (velocity-aligned D frame of docs/conventions.md): d1, d2 (to the right), d3 = b3 (down through the disc).
 
 The markers' spread about their mean carries the attitude residual: the small rotation δθ [rad] that
 best maps the predicted lever arms p̃_j = p_j − p̄ onto the measured ones,

@@ -34,7 +34,7 @@ Units (``noise.model`` in the run configuration):
   the judgement is stable); the sampled
   posterior is conditional on that judgement, and its draws are then reweighted to the posterior averaged
   over every judgement (:func:`.outliers.mixture_log_likelihood`,
-  :func:`bayes_disc.inference.robust.average_over_judgement`).
+  :func:`bayes_disc.inference.fitting.robust.average_over_judgement`).
 
 Per-point errors (``noise.per_point``), :class:`PointScales`: a per-row ``sigma_m`` s_i [m] (the same for
 x, y and z), or the covariance Σ_i [m²] (columns ``cov_xx … cov_zz`` written by ``bayes-disc track``),

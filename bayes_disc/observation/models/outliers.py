@@ -32,7 +32,7 @@ in a flight with many gross errors of a few σ.
 
 Points and frames with probability > 0.5 are flagged; the fit then drops the outlying points and
 restores the swapped labels (:func:`clean_flight`) and is repeated until the flags no longer change
-(:mod:`bayes_disc.inference.robust`). The posterior sampled is then conditional on that classification.
+(:mod:`bayes_disc.inference.fitting.robust`). The posterior sampled is then conditional on that classification.
 
 The posterior averaged over every classification uses the mixture, at the flight's estimated π, w, π_s
 (empirical Bayes), as the likelihood of the recording as given (:func:`mixture_log_likelihood`), with σ_f
@@ -44,7 +44,7 @@ integrated out under p(σ_f) ∝ 1/σ_f
     p(y | θ)   = ∫ p(y | θ, σ) dσ/σ,
 
 W_i the observation's whitening (per-point errors, :mod:`.noise`; I without them), which travels with the
-observation under a swap. :func:`bayes_disc.inference.robust.average_over_judgement` reweights the
+observation under a swap. :func:`bayes_disc.inference.fitting.robust.average_over_judgement` reweights the
 conditional posterior's draws to it.
 """
 from __future__ import annotations

@@ -31,12 +31,12 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import chi2
 
-from ..observation.models import MarkerPositions
-from ..observation.models.noise import RobustNoise, WhiteNoise
-from ..observation.models.outliers import (PRIOR_SHAPE, Classification, MixtureShape, clean_flight, fit_mixture,
-                                           log_marginal_over_scale, mixture_log_likelihood)
+from ...observation.models import MarkerPositions
+from ...observation.models.noise import RobustNoise, WhiteNoise
+from ...observation.models.outliers import (PRIOR_SHAPE, Classification, MixtureShape, clean_flight, fit_mixture,
+                                            log_marginal_over_scale, mixture_log_likelihood)
 from .leastsq import LeastSquaresResult, refine_least_squares
-from .model import Problem
+from ..model.problem import Problem
 
 #: the judgement a run wrote (in its output folder)
 FLAGGED = "flagged.json"

@@ -20,10 +20,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..observation.imu import estimate_timebase, find_throws, read_imu, throw_logs
-from ..observation.imu.formats import ImuFileError, InertialLog
-from ..observation.models.inertial import InertialMeasurements
-from ..physics import literature_coefficients
+from ...observation.imu import estimate_timebase, find_throws, read_imu, throw_logs
+from ...observation.imu.formats import ImuFileError, InertialLog
+from ...observation.models.inertial import InertialMeasurements
+from ...physics import literature_coefficients
 
 log = logging.getLogger(__name__)
 
@@ -111,8 +111,8 @@ def inertial_model(throw: InertialThrow, g: float) -> InertialMeasurements:
 def level_start(throw: InertialThrow, speed: float = 12.0, alpha: float = 0.1, phase: float = 0.0) -> np.ndarray:
     """A (13,) start state: release height 1 m, level right-side-up disc, body rates from the gyro at
     release, air velocity V (cos α cos ψ, cos α sin ψ, sin α) in body axes."""
-    from ..physics.frames import matrix_to_quat
-    from .model import INERTIAL_RELEASE_HEIGHT, R_LEVEL
+    from ...physics.frames import matrix_to_quat
+    from .problem import INERTIAL_RELEASE_HEIGHT, R_LEVEL
     u = speed * np.array([np.cos(alpha) * np.cos(phase), np.cos(alpha) * np.sin(phase), np.sin(alpha)])
     return np.r_[0.0, 0.0, INERTIAL_RELEASE_HEIGHT, R_LEVEL @ u, matrix_to_quat(R_LEVEL), throw.log.gyro[0]]
 

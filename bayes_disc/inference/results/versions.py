@@ -4,7 +4,7 @@ from __future__ import annotations
 import platform
 from importlib import metadata
 
-from .._version import __version__
+from ..._version import __version__
 
 #: the numerical packages whose versions a run records
 RECORDED_PACKAGES = ("numpy", "scipy", "numba", "emcee", "arviz", "corner", "matplotlib", "h5py")

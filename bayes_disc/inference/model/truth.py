@@ -1,4 +1,4 @@
-"""θ at the truth of a synthetic data set (``bayes-disc synth``'s truth JSON, SPEC §5).
+"""θ at the truth of a synthetic data set (``bayes-disc synth``'s truth JSON, docs/configuration.md).
 
 Used where a known truth is compared with what the fit reports: calibration checks at the truth, recovery
 benchmarks and tests. Entries the truth JSON does not give (physics-term parameters, explanations, noise
@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..observation.markers import FlightObservation
-from ..physics import COEFFICIENT_NAMES
-from .model import Problem
+from ...observation.markers import FlightObservation
+from ...physics import COEFFICIENT_NAMES
+from .problem import Problem
 
 #: the inertial logger's shared mount parameters: θ name -> (truth key, index or None)
 _LOGGER_SHARED = {"imu_offset_x": ("offset_m", 0), "imu_offset_y": ("offset_m", 1), "imu_offset_z": ("offset_m", 2),

@@ -1,6 +1,6 @@
 """The parameter layout: the one place that knows what every entry of θ is.
 
-θ = [ the ten coefficients (SPEC §2) |
+θ = [ the ten coefficients (docs/conventions.md) |
       extension: physics-term parameters, data-explanation parameters, then the parameters the
       observation models share across flights (e.g. the logger's position) |
       per flight f: initial conditions, then the flight's own observation-model parameters ]
@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..physics import COEFFICIENT_NAMES, COEFFICIENT_UNITS, Term, TermParameter
+from ...physics import COEFFICIENT_NAMES, COEFFICIENT_UNITS, Term, TermParameter
 
 IC_NAMES = ("x", "y", "z", "vx", "vy", "vz", "th1", "th2", "th3", "wx", "wy", "wz")
 IC_UNITS = ("m", "m", "m", "m/s", "m/s", "m/s", "rad", "rad", "rad", "rad/s", "rad/s", "rad/s")
@@ -127,10 +127,6 @@ class ParameterLayout:
         return self._flight_start[-1]
 
     # -- slices ---------------------------------------------------------------------------------------------
-    @property
-    def coef_slice(self) -> slice:
-        return slice(0, self.n_coef)
-
     @property
     def ext_slice(self) -> slice:
         return slice(self.n_coef, self.ic_start)

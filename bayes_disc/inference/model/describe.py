@@ -2,7 +2,7 @@
 marker noise models."""
 from __future__ import annotations
 
-from ..observation.models import MarkerPositions
+from ...observation.models import MarkerPositions
 
 
 def flight_info(problem) -> dict:

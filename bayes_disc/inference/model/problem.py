@@ -26,11 +26,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..observation.explanations import DataExplanation
-from ..observation.markers import FlightObservation
-from ..observation.models import MarkerPositions, ObservationModel
-from ..physics import COEFFICIENT_NAMES, Disc, Environment, SimulatorSettings, Term, flight_conditions, simulate
-from ..physics.frames import matrix_to_quat, quat_from_rotvec, quat_multiply, quat_to_matrix, quat_to_rotvec
+from ...observation.explanations import DataExplanation
+from ...observation.markers import FlightObservation
+from ...observation.models import MarkerPositions, ObservationModel
+from ...physics import COEFFICIENT_NAMES, Disc, Environment, SimulatorSettings, Term, flight_conditions, simulate
+from ...physics.frames import matrix_to_quat, quat_from_rotvec, quat_multiply, quat_to_matrix, quat_to_rotvec
 from .layout import FULL_IC, IC_NAMES, INERTIAL_IC, ParameterLayout
 from .priors import coefficient_prior
 

@@ -29,9 +29,8 @@ Three exact Metropolis–Hastings moves follow (each leaves the posterior invari
 And :class:`IndependenceJump` — the independence Metropolis–Hastings jump x′ ~ q, accepted with probability
 min(1, p(x′ | y) q(x) / p(x | y) q(x′)), that keeps ln q of every walker's position after the jump, so a
 walker that has not moved since (rejected, or untouched by the moves in between) costs no new density
-evaluation: with the ridge proposals' per-point algebra, ln q cost about as much as the log-posterior at
-24 flights (298 parameters: 0.097 s against 0.16 s for 128 walkers) until the factors became block-sparse
-(stop 38: 56 → 12 ms for 128 walkers on seed 18's 24 flights, :mod:`._ridge_kernels`).
+evaluation (with the ridge proposals' per-point algebra, ln q costs a fair share of a log-posterior
+evaluation at many flights, even with block-sparse factors: :mod:`._ridge_kernels`).
 
 And :class:`RidgeCarry` — the jump along a ridge proposal that draws the coefficients afresh and carries
 every flight's whitened place across the valley, so that its acceptance does not fall as flights are
@@ -46,7 +45,7 @@ from emcee.moves.mh import MHMove
 from emcee.moves.move import Move
 from emcee.state import State
 
-from .model import Problem
+from ..model.problem import Problem
 from .proposals import scaled_cholesky
 
 

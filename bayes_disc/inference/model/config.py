@@ -1,6 +1,6 @@
-"""Run configuration (SPEC §5 subset plus bayes-disc's own keys), validated up front.
+"""Run configuration (docs/configuration.md plus bayes-disc's own keys), validated up front.
 
-Keys beyond SPEC §5 (all optional):
+Keys beyond those of docs/configuration.md (all optional):
 
 ```yaml
 sampler:                 # emcee settings
@@ -40,11 +40,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from ..observation.config_io import ConfigError, Section, load_yaml
-from ..observation.config_blocks import read_disc_env, read_markers, read_physics
-from ..observation.models.noise import NOISE_MODELS, PER_POINT
-from ..physics import COEFFICIENT_NAMES, LITERATURE, Disc, Environment, literature_coefficients
-from ..physics.kernel import DEFAULT_METHOD, TABLEAUX
+from ...observation.config_io import ConfigError, Section, load_yaml
+from ...observation.config_blocks import read_disc_env, read_markers, read_physics
+from ...observation.models.noise import NOISE_MODELS, PER_POINT
+from ...physics import COEFFICIENT_NAMES, LITERATURE, Disc, Environment, literature_coefficients
+from ...physics.kernel import DEFAULT_METHOD, TABLEAUX
 from .priors import CoefficientPrior, prior_around
 
 PRIORS = ("potts_crowther", "weak")
@@ -190,7 +190,7 @@ def load_config(path, output_override=None) -> RunConfig:
     Parameters
     ----------
     path : str or Path
-        The configuration file (SPEC §5 plus the keys of this module's docstring); relative paths in it
+        The configuration file (docs/configuration.md plus the keys of this module's docstring); relative paths in it
         resolve against its folder.
     output_override : str or Path, optional
         Replaces the configuration's output folder.
@@ -211,6 +211,8 @@ def load_config(path, output_override=None) -> RunConfig:
 
 def config_from_mapping(data: dict, path, output_override=None) -> RunConfig:
     """Validate a configuration already read into a mapping (same keys and rules as CONFIG.yaml).
+
+    Long: one validation pass over the top-level keys, in the order their errors are reported.
 
     Parameters
     ----------

@@ -1,8 +1,9 @@
 """Convergence statistics of ensemble chains (n_ensembles, n_steps, n_walkers, dim).
 
-R-hat is computed across *ensembles* (each ensemble one chain, its walkers' draws pooled step by step,
-so split-R-hat splits in time); bulk ESS treats every walker as a chain (autocorrelation along steps).
-Both are the rank-normalised estimators of Vehtari et al. (2021), written here as ArviZ 0.23 writes them
+One R-hat function, :func:`rhat`, and one ESS function, :func:`ess`, whose ``layout`` says what a chain is:
+the sampler's stopping rule computes R-hat across *ensembles* (``layout="ensembles"``: each ensemble one chain,
+its walkers' draws pooled step by step, so split-R-hat splits in time) and bulk ESS with every walker a chain
+(``layout="walkers"``: autocorrelation along steps). Both are the rank-normalised estimators of Vehtari et al. (2021), written here as ArviZ 0.23 writes them
 (``az.rhat(method="rank")``, ``az.ess(method="bulk")``: the same ranks, back-transform, split, Geyer
 sequences and floors) but for every parameter at once: ArviZ loops over the parameters in Python through
 xarray, which took seconds per convergence check on the demo while the sampling processes waited. The
@@ -16,8 +17,7 @@ tests compare both with ArviZ to 1e-10 (tests/test_diagnostics_mcmc.py). :func:`
 
 The ranks are found from the runs of repeated draws (an ensemble's walker repeats its position on every
 rejected proposal): each run is ranked once and its normal score repeated over it (:func:`_z_and_median`),
-the same numbers as sorting every draw, bit for bit (tests/test_diagnostics_mcmc.py), 3–4× faster on a
-24-flight run's chains (``benchmarks/bench_ranks.py``).
+the same numbers as sorting every draw, bit for bit (tests/test_diagnostics_mcmc.py), and faster on long chains.
 """
 from __future__ import annotations
 
@@ -105,8 +105,8 @@ def _z_and_median(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return z.reshape(x.shape), median
 
 
-def _rhat(x: np.ndarray) -> np.ndarray:
-    """Potential scale reduction per parameter of x (p, m, n)."""
+def _psrf(x: np.ndarray) -> np.ndarray:
+    """Potential scale reduction factor (the R̂ formula) per parameter of x (p, m, n), chains as given."""
     n = x.shape[2]
     within = np.var(x, axis=2, ddof=1).mean(axis=1)
     between = n * np.var(x.mean(axis=2), axis=1, ddof=1)
@@ -119,26 +119,77 @@ def _valid(x: np.ndarray, min_chains: int) -> np.ndarray:
     return ok & (x.shape[2] >= 4) & (x.shape[1] >= min_chains)
 
 
-def rank_rhat(x: np.ndarray) -> np.ndarray:
-    """Rank-normalised split R-hat of every parameter.
+#: what a chain is in :func:`rhat` and :func:`ess`: ``"chains"``: x is (p, n_chains, n_draws);
+#: ``"ensembles"``: x is an ensemble sampler's chain (n_ensembles, n_steps, n_walkers, dim) and each ensemble is
+#: one chain, its walkers' draws pooled step-major (the split halves are early and late steps);
+#: ``"walkers"``: the same array with every walker of every ensemble a chain
+LAYOUTS = ("chains", "ensembles", "walkers")
+
+
+def _as_chains(x: np.ndarray, layout: str) -> np.ndarray:
+    """(p, n_chains, n_draws) view of x in one of :data:`LAYOUTS`."""
+    if layout == "chains":
+        return x
+    n_ens, n_steps, n_w, dim = x.shape
+    if layout == "ensembles":
+        return np.moveaxis(x.reshape(n_ens, n_steps * n_w, dim), 2, 0)      # step-major
+    if layout == "walkers":
+        return np.moveaxis(np.moveaxis(x, 2, 1).reshape(n_ens * n_w, n_steps, dim), 2, 0)
+    raise ValueError(f"layout {layout!r}: expected one of {', '.join(LAYOUTS)}")
+
+
+def rhat(x: np.ndarray, method: str = "rank", layout: str = "chains") -> np.ndarray:
+    """Rank-normalised split R-hat of every parameter (``az.rhat(method="rank")``).
 
     Parameters
     ----------
-    x : (p, n_chains, n_draws) array
+    x : array
+        (p, n_chains, n_draws), or an ensemble chain (n_ensembles, n_steps, n_walkers, dim) with
+        ``layout="ensembles"`` (as the sampler's stopping rule and summary.json's ``r_hat``) or ``"walkers"``.
+    method : str
+        ``"rank"`` (the only one: max of the bulk and the folded tail R-hat of the rank-normalised split chains).
+    layout : str
+        What a chain is (:data:`LAYOUTS`).
 
     Returns
     -------
-    (p,) array
+    (p,) or (dim,) array
         max(bulk, tail) R-hat; NaN where a parameter has non-finite draws, fewer than 2 chains or 4 draws.
     """
+    if method != "rank":
+        raise ValueError(f"R-hat method {method!r}: only 'rank' is implemented")
+    if layout == "ensembles":
+        n_ens, n_steps, n_w, _ = x.shape
+        size = n_steps * n_w
+        if not (size % 2 or size < 4 or n_ens < 2 or not np.all(np.isfinite(x))):
+            return _psrf_pooled_ensembles(x)
+    x = _as_chains(x, layout)
     out = np.full(x.shape[0], np.nan)
     ok = _valid(x, 2)
     if not ok.any():
         return out
     s = _split(x[ok])
     z, median = _z_and_median(s)
-    out[ok] = np.maximum(_rhat(z), _rhat(_z_scale(np.abs(s - median[:, None, None]))))
+    out[ok] = np.maximum(_psrf(z), _psrf(_z_scale(np.abs(s - median[:, None, None]))))
     return out
+
+
+def _psrf_pooled_ensembles(chain: np.ndarray) -> np.ndarray:
+    """:func:`rhat` with ``layout="ensembles"`` for finite chains of an even number ≥ 4 of draws per ensemble
+    and ≥ 2 ensembles: the split keeps every draw, so the ranks are those of all draws, computed with each
+    walker's steps in a row (repeated positions are runs: :func:`_z_and_median`)."""
+    n_ens, n_steps, n_w, dim = chain.shape
+    size = n_steps * n_w
+    walkers = np.ascontiguousarray(np.transpose(chain, (3, 0, 2, 1))).reshape(dim, n_ens * n_w, n_steps)
+
+    def split_by_ensemble(y):
+        """(dim, n_ens·n_w, n_steps) in walker order → the split ensembles' chains, step-major."""
+        y = y.reshape(dim, n_ens, n_w, n_steps).transpose(0, 1, 3, 2).reshape(dim, n_ens, size)
+        return _split(y)
+
+    z, median = _z_and_median(walkers)
+    folded = _z_scale(np.abs(walkers - median[:, None, None]))
+    return np.maximum(_psrf(split_by_ensemble(z)), _psrf(split_by_ensemble(folded)))
 
 
 def _autocov(x: np.ndarray) -> np.ndarray:
@@ -149,7 +200,7 @@ def _autocov(x: np.ndarray) -> np.ndarray:
     return scipy.fft.irfft(f.real ** 2 + f.imag ** 2, n=m, axis=-1)[..., :n] / n
 
 
-def _geyer_ess(mean_acov: np.ndarray, var_plus: float, mean_var: float, size: int) -> float:
+def _geyer_effective_draws(mean_acov: np.ndarray, var_plus: float, mean_var: float, size: int) -> float:
     """ESS of one parameter from its chain-averaged autocovariance (ArviZ's ``_ess`` after the FFT)."""
     n = mean_acov.size
     rho = np.zeros(n)
@@ -179,8 +230,9 @@ def _geyer_ess(mean_acov: np.ndarray, var_plus: float, mean_var: float, size: in
     return float("nan") if np.isnan(rho).any() else size / tau
 
 
-def _ess(z: np.ndarray) -> np.ndarray:
-    """ESS of every parameter of z (p, m, n), chains as given (ArviZ's ``_ess``; z already split, finite)."""
+def _effective_draws(z: np.ndarray) -> np.ndarray:
+    """Effective sample size of every parameter of z (p, m, n), chains as given (ArviZ's ``_ess``; z already
+    split, finite)."""
     out = np.empty(z.shape[0])
     m, n = z.shape[1:]
     acov = _autocov(z)                                      # (p, m, n)
@@ -192,26 +244,35 @@ def _ess(z: np.ndarray) -> np.ndarray:
     flat = z.reshape(z.shape[0], -1)
     constant = flat.max(axis=1) - flat.min(axis=1) < np.finfo(float).resolution
     for j in range(z.shape[0]):
-        out[j] = m * n if constant[j] else _geyer_ess(mean_acov[j], var_plus[j], mean_var[j], m * n)
+        out[j] = m * n if constant[j] else _geyer_effective_draws(mean_acov[j], var_plus[j], mean_var[j], m * n)
     return out
 
 
-def bulk_ess(x: np.ndarray) -> np.ndarray:
-    """Bulk effective sample size (rank-normalised split chains) of every parameter.
+def ess(x: np.ndarray, method: str = "bulk", layout: str = "chains") -> np.ndarray:
+    """Bulk effective sample size (rank-normalised split chains) of every parameter (``az.ess(method="bulk")``).
 
     Parameters
     ----------
-    x : (p, n_chains, n_draws) array
+    x : array
+        (p, n_chains, n_draws), or an ensemble chain (n_ensembles, n_steps, n_walkers, dim) with
+        ``layout="walkers"`` (every walker a chain, as the sampler's stopping rule) or ``"ensembles"``.
+    method : str
+        ``"bulk"`` (the only one).
+    layout : str
+        What a chain is (:data:`LAYOUTS`).
 
     Returns
     -------
-    (p,) array
+    (p,) or (dim,) array
         ESS in draws; NaN where a parameter has non-finite draws or fewer than 4 draws.
     """
+    if method != "bulk":
+        raise ValueError(f"ESS method {method!r}: only 'bulk' is implemented")
+    x = _as_chains(x, layout)
     out = np.full(x.shape[0], np.nan)
     ok = _valid(x, 1)
     if ok.any():
-        out[ok] = _ess(_z_scale(_split(x[ok])))
+        out[ok] = _effective_draws(_z_scale(_split(x[ok])))
     return out
 
 
@@ -251,62 +312,16 @@ def summary_diagnostics(x: np.ndarray) -> dict[str, np.ndarray]:
     split = _split(y)
     z_split = _z_scale(split)
     lo, hi = np.quantile(flat, [0.05, 0.95], axis=1)           # type 7, as ArviZ's mquantiles(1, 1)
-    out["ess_tail"][ok] = np.minimum(_ess(_split((y <= lo[:, None, None]).astype(float))),
-                                     _ess(_split((y <= hi[:, None, None]).astype(float))))
+    out["ess_tail"][ok] = np.minimum(_effective_draws(_split((y <= lo[:, None, None]).astype(float))),
+                                     _effective_draws(_split((y <= hi[:, None, None]).astype(float))))
     if y.shape[1] >= 2:
         folded = np.abs(y - np.median(flat, axis=1)[:, None, None])
-        out["r_hat"][ok] = np.maximum(_rhat(z_split), _rhat(_z_scale(_split(folded))))
+        out["r_hat"][ok] = np.maximum(_psrf(z_split), _psrf(_z_scale(_split(folded))))
     c2 = (y - flat.mean(axis=1)[:, None, None]) ** 2
     c2_sum = c2.reshape(c2.shape[0], -1).sum(axis=1)
-    out["mcse_mean"][ok] = np.sqrt(c2_sum / (size - 1) / _ess(split))
+    out["mcse_mean"][ok] = np.sqrt(c2_sum / (size - 1) / _effective_draws(split))
     evar = c2_sum / size
-    varvar = ((c2 ** 2).reshape(c2.shape[0], -1).mean(axis=1) - evar ** 2) / _ess(_split(c2))
+    varvar = ((c2 ** 2).reshape(c2.shape[0], -1).mean(axis=1) - evar ** 2) / _effective_draws(_split(c2))
     out["mcse_sd"][ok] = np.sqrt(varvar / evar / 4)
-    out["ess_bulk"][ok] = _ess(z_split)
+    out["ess_bulk"][ok] = _effective_draws(z_split)
     return out
-
-
-def rhat_across(chain: np.ndarray) -> np.ndarray:
-    """R-hat across ensembles (each ensemble one chain of its walkers' draws, step-major).
-
-    Parameters
-    ----------
-    chain : (n_ensembles, n_steps, n_walkers, dim) array
-
-    Returns
-    -------
-    (dim,) array
-    """
-    n_ens, n_steps, n_w, dim = chain.shape
-    size = n_steps * n_w
-    if size % 2 or size < 4 or n_ens < 2 or not np.all(np.isfinite(chain)):
-        x = chain.reshape(n_ens, size, dim)                 # step-major: halves are early and late steps
-        return rank_rhat(np.moveaxis(x, 2, 0))
-    # an even number of draws per ensemble: the split keeps every draw, so the ranks are those of all draws,
-    # computed with each walker's steps in a row (repeated positions are runs: :func:`_z_and_median`)
-    walkers = np.ascontiguousarray(np.transpose(chain, (3, 0, 2, 1))).reshape(dim, n_ens * n_w, n_steps)
-
-    def split_by_ensemble(y):
-        """(dim, n_ens·n_w, n_steps) in walker order → the split ensembles' chains, step-major."""
-        y = y.reshape(dim, n_ens, n_w, n_steps).transpose(0, 1, 3, 2).reshape(dim, n_ens, size)
-        return _split(y)
-
-    z, median = _z_and_median(walkers)
-    folded = _z_scale(np.abs(walkers - median[:, None, None]))
-    return np.maximum(_rhat(split_by_ensemble(z)), _rhat(split_by_ensemble(folded)))
-
-
-def ess_bulk(chain: np.ndarray) -> np.ndarray:
-    """Bulk ESS with every walker of every ensemble as a chain.
-
-    Parameters
-    ----------
-    chain : (n_ensembles, n_steps, n_walkers, dim) array
-
-    Returns
-    -------
-    (dim,) array
-    """
-    n_ens, n_steps, n_w, dim = chain.shape
-    x = np.moveaxis(chain, 2, 1).reshape(n_ens * n_w, n_steps, dim)
-    return bulk_ess(np.moveaxis(x, 2, 0))

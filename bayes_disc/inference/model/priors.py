@@ -1,7 +1,7 @@
 """Priors on the coefficients (named sets) and on the nuisance parameters.
 
 ``potts_crowther``: Gaussians on CL0, CLa, CD0, CDa, CM0, CMa centred on the Potts & Crowther (2000)
-linearised wind-tunnel values (SPEC §2) with widths of about half the value or more, so a few flights
+linearised wind-tunnel values (docs/conventions.md) with widths of about half the value or more, so a few flights
 dominate them: CL0 0.2 ± 0.2, CLa 2.96 ± 1.5, CD0 0.08 ± 0.1, CDa 2.6 ± 1.5, CM0 −0.02 ± 0.1,
 CMa 0.13 ± 0.3. Rate coefficients get weak zero-centred priors an order of magnitude wider than any
 published value: CMq, CRp 0 ± 0.05, CRr 0 ± 0.01 (rad/s)⁻¹, CNr 0 ± 1e−3 (rad/s)⁻¹.
@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 
-from ..physics import COEFFICIENT_NAMES, POTTS_CROWTHER
+from ...physics import COEFFICIENT_NAMES, POTTS_CROWTHER
 
 RATE_PRIORS = {"CMq": (0.0, 0.05), "CRr": (0.0, 0.01), "CRp": (0.0, 0.05), "CNr": (0.0, 1e-3)}
 PC_WIDTHS = {"CL0": 0.2, "CLa": 1.5, "CD0": 0.1, "CDa": 1.5, "CM0": 0.1, "CMa": 0.3}
@@ -36,7 +36,7 @@ class CoefficientPrior:
     name : str
         ``potts_crowther``, ``weak`` or ``around``.
     mean, sd : dict
-        {coefficient: value} in the coefficient's unit (SPEC §2); every sd > 0.
+        {coefficient: value} in the coefficient's unit (docs/conventions.md); every sd > 0.
     description : str
         One line for summary.json and the report.
     """
@@ -53,7 +53,7 @@ def prior_around(values: dict, relative_sd: float, sd: dict | None = None, label
     Parameters
     ----------
     values : dict
-        {coefficient: v_k} for all ten coefficients (SPEC §2 units).
+        {coefficient: v_k} for all ten coefficients (units as in docs/conventions.md).
     relative_sd : float
         s_k / |v_k| where ``sd`` does not give s_k.
     sd : dict, optional

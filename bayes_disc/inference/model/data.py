@@ -3,16 +3,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..observation.config_io import ConfigError
-from ..observation.markers import load_flights
-from ..observation.plausibility import check_flights
-from ..observation.registry import split_extensions
-from ..physics import SimulatorSettings
+from ...observation.config_io import ConfigError
+from ...observation.markers import load_flights
+from ...observation.plausibility import check_flights
+from ...observation.registry import split_extensions
+from ...physics import SimulatorSettings
 from .config import RunConfig
-from ..observation.models import MarkerPositions
+from ...observation.models import MarkerPositions
 from .inertial import inertial_model, level_start, load_run_throws, own_start, search_starts
 from .initial import initial_state_from_data
-from .model import Problem
+from .problem import Problem
 
 
 def load_run_flights(cfg: RunConfig):

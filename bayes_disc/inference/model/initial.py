@@ -6,8 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..observation.markers import FlightObservation
-from ..physics.frames import matrix_to_quat, quat_from_rotvec, quat_multiply, quat_to_rotvec
+from ...observation.markers import FlightObservation
+from ...physics.frames import matrix_to_quat, quat_from_rotvec, quat_multiply, quat_to_rotvec
 
 
 def rigid_fit(body: np.ndarray, world: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:

@@ -38,10 +38,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..physics.parallel import mp_context
+from ...physics.parallel import mp_context
 from .arrow import ArrowJacobian
-from .leastsq import MU_NEAR, LeastSquaresResult, jacobian_blocks, minimise, refit_from_lower, whitened_costs
-from .model import Problem
+from .minimiser import MU_NEAR, minimise
+from .leastsq import LeastSquaresResult, refit_from_lower
+from .residuals import jacobian_blocks, whitened_costs
+from ..model.problem import Problem
 
 #: the path stops past this profile deviance (≈ 3.5 σ for a Gaussian)
 MAX_DEVIANCE = 12.0
@@ -58,20 +60,16 @@ MARGINAL_RISE = 1.0
 DEVIANCE_TOL = 1e-3
 #: a profile fit also stops once the Gauss–Newton decrement ½ gᵀH⁻¹g is at most this (cost units), on the point
 #: whose Jacobian it has just computed, which then gives the point's covariance. The decrement is the quadratic
-#: model's one-step gain and falls short of what a slow ridge still holds: with ½ DEVIANCE_TOL, 10 % of the points
-#: of the 24-flight benchmark ended over DEVIANCE_TOL short of a tight refit (max 1.8·10⁻³); with ¼ of it, max
-#: 9.2·10⁻⁴ and 3.5 Jacobians per point instead of 4.1 (``benchmarks/bench_profile_fits.py``)
+#: model's one-step gain and falls short of what a slow ridge still holds: a quarter of DEVIANCE_TOL keeps the
+#: points of a 24-flight campaign within DEVIANCE_TOL of a tight refit
 DECREMENT_TOL = 0.25 * DEVIANCE_TOL
 #: a profile fit whose Gauss–Newton decrement is at most this (cost units; deviance 5·10⁻³) takes one more step
-#: and stops there if the step gains what the model predicted, to DECREMENT_TOL (:func:`.leastsq.minimise`'s
+#: and stops there if the step gains what the model predicted, to DECREMENT_TOL (:func:`.minimiser.minimise`'s
 #: ``final_step``); the point's covariance then comes from the Jacobian one step before it. With many flights the
 #: Gauss–Newton iteration converges linearly near a profile point (decrements ×0.3–0.6 per Jacobian on 24 flights,
 #: ×10⁻³ on 4: the residual curvature it drops grows with the ridges), so the last Jacobians bought digits no
-#: verdict reads. Seed 19 of ``benchmarks/bench_scale.py``, the ten coefficients, one process
-#: (``benchmarks/bench_profile_fits.py``): Jacobians per point 2.91 → 2.35 at 24 flights (2.51 → 2.40 at 4), the
-#: stage 21.3 → 16.2 s; the deviances' shortfall against a tight refit max 2.0 → 4.1·10⁻³ (90 %: 1.0 → 1.3·10⁻³;
-#: unchanged at 4 flights); the covariance one step away: sds within 0.9 %, ½ ln|S| (the Laplace marginal's
-#: volume) within 0.29 on CL0, CRr, CMa and CMq's paths
+#: verdict reads; the deviances then fall short of a tight refit by at most a few 10⁻³, and the covariance one step
+#: away differs by under 1 % in its sds.
 FINAL_DECREMENT = 10.0 * DECREMENT_TOL
 #: a point whose deviance exceeds this multiple of the stopping deviance is a failed fit or a cliff: it
 #: still bounds the profile but is not ``ok`` (not used as a posterior approximation)
@@ -318,13 +316,10 @@ def _fixed_fit(problem: Problem, sigma: np.ndarray, x0: np.ndarray, cov0: np.nda
     small step before it.
 
     The fit starts from the best (lowest cost) of x0 with θ_i set to ``value``, :func:`conditional_start`
-    (x0, cov0) and, when given, ``bent`` (:func:`bent_start`): on the 24-flight benchmark the conditional start
-    halves the Jacobians per fit (7.2 → 3.6 at 4 flights, 8.4 → 5.1 at 24), the bent one saves another 13 %
-    (seed 19 of ``benchmarks/bench_scale.py``, the ten coefficients' profiles: 268 → 233 Jacobians at 4 flights,
-    342 → 296 at 24), and the held start guards a curved ridge where the predictions overshoot. The starts
-    are next to the constrained optimum, so the fit starts with little damping ``mu0``
-    (:data:`.leastsq.MU_NEAR`: 3.0–3.1 Jacobians per fit at 4–24 flights, against 4.2–6.6 with
-    :data:`.leastsq.MU_FAR`). It stops when the Gauss–Newton decrement (the cost decrease its quadratic model
+    (x0, cov0) and, when given, ``bent`` (:func:`bent_start`): the conditional start about halves the
+    Jacobians per fit on the campaign benchmark (``benchmarks/bench_scale.py``), the bent one saves about
+    another eighth, and the held start guards a curved ridge where the predictions overshoot. The starts are
+    next to the constrained optimum, so the fit starts with little damping ``mu0`` (:data:`.minimiser.MU_NEAR`). It stops when the Gauss–Newton decrement (the cost decrease its quadratic model
     still expects) is at most ``dtol`` — the Jacobian there is the point's own, so none is computed twice —;
     after one more step from a decrement at most ``final`` whose gain is as predicted (to ``dtol``); and
     when a step lowers the deviance 2 Δcost by less than :data:`DEVIANCE_TOL` (``cost0``: the optimum's cost,
@@ -362,7 +357,7 @@ def profile_side(problem: Problem, theta_hat: np.ndarray, sigma: np.ndarray, cov
     (module docstring) has fallen by ``max_deviance``/2 from its highest value on that side, or after
     ``extended_points`` points (:func:`side_done`); and at a point below the optimum (deviance
     < −:data:`LOWER_OPTIMUM_DEVIANCE`: θ̂ was not the lowest point). The two sides start from θ̂ and do not
-    depend on each other. ``mu0`` is every fit's initial damping (:func:`.leastsq.minimise`), ``dtol`` its
+    depend on each other. ``mu0`` is every fit's initial damping (:func:`.minimiser.minimise`), ``dtol`` its
     decrement tolerance (:func:`_fixed_fit`).
 
     Returns

@@ -5,14 +5,14 @@ quantifying the uncertainty of nonsense.
 Threshold :data:`MAX_PLAUSIBLE_RMS_M` = 20 mm: motion capture measures disc markers to 0.1–3 mm and
 video triangulation to a few mm; physics the base model lacks (side force, wind, ground effect, marker
 offsets of a few mm, a gust) leaves 1–3× the noise on synthetic flights (tests/test_missing_physics.py),
-i.e. below 10 mm even with 3 mm noise. A y-up export gave 22–70 mm (issue #14); time in milliseconds,
+i.e. below 10 mm even with 3 mm noise. A y-up export gave 22–70 mm; time in milliseconds,
 a wrong layout or two throws under one flight name give tens of mm or more.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..observation.plausibility import ImplausibleDataError
+from ...observation.plausibility import ImplausibleDataError
 
 MAX_PLAUSIBLE_RMS_M = 0.020
 

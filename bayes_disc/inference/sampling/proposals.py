@@ -27,7 +27,7 @@ import numpy as np
 from scipy.linalg import lapack, solve_triangular
 
 from ._ridge_kernels import interpolated_product, interpolated_whiten
-from .model import Problem
+from ..model.problem import Problem
 
 #: proposal sd / posterior sd after a warm-up re-fit (slightly wider: safe tails)
 PROPOSAL_INFLATION = 1.03
@@ -38,7 +38,7 @@ class Proposal:
     """Gaussian reference N(μ, Σ), Σ = L Lᵀ: the moments of the independence proposal, then of the
     warm-up samples (:meth:`refit`); the flight-block moves take their shape from it (:mod:`.moves`).
 
-    It proposed preconditioned Crank–Nicolson steps x′ = μ + ρ (x − μ) + √(1 − ρ²) L z until stop 31; on
+    It once proposed preconditioned Crank–Nicolson steps x′ = μ + ρ (x − μ) + √(1 − ρ²) L z; on
     the curved posteriors here they were accepted < 1 % of the time (:mod:`.sampler`), so they were
     dropped."""
 
@@ -492,7 +492,7 @@ class CompositeProposal:
                                              z[f"{j}_mixture_log_weights"]))
             else:
                 a = {k: z[f"{j}_ridge_{k}"] for k in ("v", "log_g", "s", "means", "slopes", "chols")}
-                if f"{j}_ridge_first" in z:     # block-sparse factors (files written before stop 38: dense)
+                if f"{j}_ridge_first" in z:     # block-sparse factors (older files: dense)
                     a.update(first=z[f"{j}_ridge_first"], shared=int(z[f"{j}_ridge_shared"]))
                 parts.append(RidgeProposal(index=int(z[f"{j}_ridge_index"]), **a))
         return cls(tuple(parts), z["log_weights"])
