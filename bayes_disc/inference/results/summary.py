@@ -67,7 +67,7 @@ def summarize(idata, names, threads: int = 1) -> dict:
         "ess_tail", "mcse_mean", "mcse_sd"}}`` in the parameter's unit (σ in m; ESS in samples). ``r_hat`` is
         across ensembles (``az.rhat(ensemble_view(idata.posterior))``); ``r_hat_walkers``, the ESS and the MCSE
         are ``az.summary(idata, kind="diagnostics")``'s (walkers as chains), computed for every parameter at
-        once by :mod:`.mcmc_stats` (equal to ArviZ's; tests/test_diagnostics_mcmc.py, tests/test_results.py).
+        once by :mod:`bayes_disc.inference.sampling.mcmc_stats` (equal to ArviZ's; tests/test_mcmc_stats.py, tests/test_results.py).
     """
     post = idata.posterior
     by_ensemble = ensemble_view(post)

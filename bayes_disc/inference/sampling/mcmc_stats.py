@@ -7,7 +7,7 @@ its walkers' draws pooled step by step, so split-R-hat splits in time) and bulk 
 (``az.rhat(method="rank")``, ``az.ess(method="bulk")``: the same ranks, back-transform, split, Geyer
 sequences and floors) but for every parameter at once: ArviZ loops over the parameters in Python through
 xarray, which took seconds per convergence check on the demo while the sampling processes waited. The
-tests compare both with ArviZ to 1e-10 (tests/test_diagnostics_mcmc.py). :func:`summary_diagnostics` gives
+tests compare both with ArviZ to 1e-10 (tests/test_mcmc_stats.py). :func:`summary_diagnostics` gives
 ``az.summary(kind="diagnostics")``'s five columns the same way (summary.json's per-parameter diagnostics).
 
     z = Φ⁻¹((r − 3/8) / (S + 1/4))              r: average rank among the S draws of the parameter
@@ -17,7 +17,7 @@ tests compare both with ArviZ to 1e-10 (tests/test_diagnostics_mcmc.py). :func:`
 
 The ranks are found from the runs of repeated draws (an ensemble's walker repeats its position on every
 rejected proposal): each run is ranked once and its normal score repeated over it (:func:`_z_and_median`),
-the same numbers as sorting every draw, bit for bit (tests/test_diagnostics_mcmc.py), and faster on long chains.
+the same numbers as sorting every draw, bit for bit (tests/test_mcmc_stats.py), and faster on long chains.
 """
 from __future__ import annotations
 
