@@ -174,12 +174,14 @@ def build_parser() -> argparse.ArgumentParser:
     common = argparse.ArgumentParser(add_help=False)
     _verbosity_options(common, argparse.SUPPRESS)
     sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("simulate", parents=[common],
-                       help="simulate a case (reference JSON format) to a marker CSV")
-    p.add_argument("case", help="CASE.json: disc constants, coefficients, marker body positions, initial state, "
-                                "sample rate, duration (format: docs/data-formats.md)")
-    p.add_argument("-o", "--output", required=True, help="marker CSV to write (format: docs/data-formats.md)")
-    p.set_defaults(func=_cmd_simulate)
+    for add in (_data_commands, _run_commands, _campaign_commands):
+        add(sub, common)
+    _register_optional(sub, common)
+    return parser
+
+
+def _data_commands(sub, common) -> None:
+    """Subcommands that make or write data: ``demo``, ``simulate``, ``synth``."""
     p = sub.add_parser("demo", parents=[common],
                        help="write the demo flights and their run configuration into a folder",
                        description="Writes four synthetic flights (flights.csv, made by synth.yaml with the "
@@ -189,10 +191,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("folder", metavar="FOLDER", help="folder to write into (created if missing)")
     p.add_argument("--overwrite", action="store_true", help="replace demo files already in FOLDER")
     p.set_defaults(func=_cmd_demo)
+    p = sub.add_parser("simulate", parents=[common],
+                       help="simulate a case (reference JSON format) to a marker CSV")
+    p.add_argument("case", help="CASE.json: disc constants, coefficients, marker body positions, initial state, "
+                                "sample rate, duration (format: docs/data-formats.md)")
+    p.add_argument("-o", "--output", required=True, help="marker CSV to write (format: docs/data-formats.md)")
+    p.set_defaults(func=_cmd_simulate)
     p = sub.add_parser("synth", parents=[common],
                        help="make synthetic flights from a SYNTH.yaml description")
     p.add_argument("config", help="SYNTH.yaml")
     p.set_defaults(func=_cmd_synth)
+
+
+def _run_commands(sub, common) -> None:
+    """Subcommands that run a job on a run configuration: ``sample``, ``identifiability``, ``diagnose``,
+    ``predict``."""
     p = sub.add_parser("sample", parents=[common],
                        help="least squares + emcee posterior over coefficients and initial conditions",
                        description="The main job: joint least squares, then emcee ensembles, over the ten "
@@ -252,6 +265,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--output", metavar="DIR", help="override the config's output folder")
     _overwrite_option(p, "predict")
     p.set_defaults(func=_cmd_predict)
+
+
+def _campaign_commands(sub, common) -> None:
+    """Subcommands over many runs: ``calibrate`` (a Dask campaign) and ``compare`` (PSIS-LOO of runs)."""
     p = sub.add_parser("calibrate", parents=[common],
                        help="simulation-based calibration over many synthetic data sets, on Dask",
                        description="Draws N truths, synthesises flights from a template, fits each (least squares "
@@ -278,8 +295,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="output folders of `bayes-disc sample` (two or more)")
     p.add_argument("--output", metavar="FILE", help="write the comparison as JSON to FILE")
     p.set_defaults(func=_cmd_compare)
-    _register_optional(sub, common)
-    return parser
 
 
 def _overwrite_option(parser, job: str) -> None:

@@ -351,11 +351,11 @@ def test_later_capabilities_slot_in_as_sections(tiny, tmp_path):
     run = load_run(tiny["run"])
     run.extras["identifiability"] = {"CLa": {"verdict": "identified", "reason": "sd 3 % of the prior's"}}
     ctx = ReportContext(run, tmp_path / "figs")
-    from bayes_disc.report import content
+    from bayes_disc.report import findings
 
     def extra(c):
         return Section("extra-capability", "Extra", "A later capability's section.", "<p>hello</p>")
-    secs = build_sections(ctx, [content.identifiability_section, extra])
+    secs = build_sections(ctx, [findings.identifiability_section, extra])
     assert [s.id for s in secs] == ["identifiability", "extra-capability"]
     assert "identified" in secs[0].html and "sd 3 %" in secs[0].html
     doc = _parse(render_document("t", "s", secs))
@@ -402,22 +402,22 @@ def test_identifiability_section_says_why_no_next_throw_was_ranked(tiny, tmp_pat
     why = "not computed: the candidate throws are simulated as marker flights"
     run.extras["identifiability"] = {"coefficients": {"CLa": {"verdict": "weak", "reason": "r"}},
                                      "design": {"skipped": why}}
-    from bayes_disc.report import content
-    sec = build_sections(ReportContext(run, tmp_path / "figs"), [content.identifiability_section])[0]
+    from bayes_disc.report import findings
+    sec = build_sections(ReportContext(run, tmp_path / "figs"), [findings.identifiability_section])[0]
     assert "<h3>Next throw</h3>" in sec.html and why in sec.html and "ln volume gain" not in sec.html
 
 def test_flagged_points_and_swapped_frames_are_listed(tiny, tmp_path):
     """Robust runs (flagged.json): counts and estimated π, w, π_s per flight (– for runs from before they were
     estimated), every outlier and swap with its time and probability; runs without it have no such section."""
-    from bayes_disc.report import content
+    from bayes_disc.report import findings
     run = load_run(tiny["run"])
-    assert content.flagged_section(ReportContext(run, tmp_path / "f0")) is None
+    assert findings.flagged_section(ReportContext(run, tmp_path / "f0")) is None
     run.extras["flagged"] = {          # flagged.json: per flight
         "a": {"mixture": {"outlier_fraction": 0.0123, "outlier_width_m": 0.0385, "swap_fraction": 0.0045},
               "outliers": [{"flight": "a", "t": 0.125, "marker": "1", "probability": 0.999}],
               "swaps": [{"flight": "a", "t": 0.25, "markers": ["0", "2"], "probability": 0.99}]},
         "b": {"outliers": [{"flight": "b", "t": 0.5, "marker": "0", "probability": 0.97}], "swaps": []}}
-    sec = build_sections(ReportContext(run, tmp_path / "f1"), [content.flagged_section])[0]
+    sec = build_sections(ReportContext(run, tmp_path / "f1"), [findings.flagged_section])[0]
     assert sec.id == "flagged" and "0 ↔ 2" in sec.html and "0.1250" in sec.html and "0.970" in sec.html
     assert re.search(r"<td>a</td><td[^>]*>1</td><td[^>]*>1</td><td[^>]*>1.23 %</td><td[^>]*>38.5</td>"
                      r"<td[^>]*>0.45 %</td>", sec.html), sec.html
@@ -427,11 +427,11 @@ def test_flagged_points_and_swapped_frames_are_listed(tiny, tmp_path):
     run.extras["judgement_average"] = {"draws": 4000, "failed": 0, "pareto_k": 0.21, "ess": 3500.0, "reliable": True,
                                        "pareto_k_max": 0.7, "conditional": {"CLa": moments(2.9, 0.1)},
                                        "averaged": {"CLa": moments(2.95, 0.11)}}
-    sec = build_sections(ReportContext(run, tmp_path / "f2"), [content.flagged_section])[0]
+    sec = build_sections(ReportContext(run, tmp_path / "f2"), [findings.flagged_section])[0]
     assert "k̂ of the weights 0.21" in sec.html and "<td>CLa</td><td>2.9</td><td>2.95</td>" in sec.html
     assert "<td>1.100</td>" in sec.html
     run.extras["judgement_average"] |= {"pareto_k": 0.9, "reliable": False, "averaged": {}}
-    sec = build_sections(ReportContext(run, tmp_path / "f3"), [content.flagged_section])[0]
+    sec = build_sections(ReportContext(run, tmp_path / "f3"), [findings.flagged_section])[0]
     assert "cannot be trusted" in sec.html and "<td>CLa</td>" not in sec.html
 
 def test_diagnosis_adds_its_section_with_before_after_figure(tiny, tmp_path):
@@ -553,7 +553,7 @@ def test_diagnosis_figure_of_an_inertial_run_draws_the_logger_series():
     angles: the figure draws the most structured logger series in its own unit (before, it fell back to the
     marker series "roll", absent from the file, and the report stopped with a KeyError)."""
     from bayes_disc.report import figures as F
-    from bayes_disc.report.content import SERIES_LABELS, diagnosis_series
+    from bayes_disc.report.findings import SERIES_LABELS, diagnosis_series
     rng = np.random.default_rng(0)
     names = [f"{s}_{a}" for s in ("gyro", "acc") for a in "xyz"]
     series = {"flights": np.array(["a", "b"])}

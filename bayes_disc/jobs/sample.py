@@ -313,6 +313,80 @@ def _resume_message(name: str, steps: list) -> str:
     return text + (f"; the shorter ones are first advanced to {n})" if min(steps) < n else ")")
 
 
+def _read_problem(cfg: RunConfig, out: Path, resume: bool):
+    """The "reading flights and checks" stage: the inertial throws, the statistical problem as read (``raw``)
+    and as fitted (with a saved judgement of outliers and swaps applied on resume)."""
+    with stage("reading flights and checks") as st:
+        throws = load_run_throws(cfg) if cfg.imu else []
+        problem = raw = build_problem(cfg, throws=throws)
+        if resume and robust_flights(problem) and (out / FLAGGED).is_file() and (out / "chains" / RUN_KEY).is_file():
+            problem = with_saved_flags(problem, out)
+            logger.info(f"resume: the saved judgement of outliers and label swaps ({out / FLAGGED}) is applied")
+        st.result = f"{cfg.name}: {data_words(problem)}, {problem.dim} parameters"
+        if noise_info(problem):
+            logger.info(f"marker noise: {noise_words(noise_info(problem))}")
+        for t in throws:
+            if t.status != "ok":
+                logger.info(f"{t.name}: {t.status}: {t.reason}")
+    return throws, raw, problem
+
+
+def _prepare_sampling(cfg: RunConfig, problem, out: Path, resume: bool, progress: bool):
+    """Before sampling: on resume, the saved chains' step counts and least squares (the proposals are saved
+    with the chains); otherwise least squares, the robust fit, the profiles and their proposal. Returns
+    (problem, least-squares record, proposal or None, saved steps or None)."""
+    if resume and (out / "chains" / RUN_KEY).is_file():
+        check_same_run(cfg, problem, out)       # before counting chain files: the ensembles may differ
+    steps = saved_steps(out, cfg.sampler.ensembles) if resume else None
+    if resume and steps is None:
+        logger.warning(f"--resume: no chain files in {out / 'chains'}; starting a fresh run")
+    if steps is not None:
+        check_same_run(cfg, problem, out)
+        logger.info(_resume_message(cfg.name, steps))
+        ls_dict = saved_least_squares(out)
+        if ls_dict is None:
+            logger.warning(f"resume: the least-squares files ({', '.join(LEAST_SQUARES_FILES)}) are not all in "
+                           f"{out}; recomputing least squares")
+            _, ls_dict = _least_squares(problem, cfg, out)
+        else:
+            logger.info(f"resume: reusing the saved least-squares optimum (cost {ls_dict['cost']:.1f}) and the "
+                        "proposals saved with the chains")
+        return problem, ls_dict, None, steps    # the sampler continues with the approximation saved beside its chains
+    ls, ls_dict = _least_squares(problem, cfg, out)
+    problem, ls, ls_dict = _robust(problem, ls, ls_dict, cfg, out)
+    proposal, ls = posterior_approximation(problem, ls, cfg.sampler.processes, out, progress=progress,
+                                           max_nfev=cfg.least_squares.max_nfev)
+    (out / "chains").mkdir(exist_ok=True)
+    (out / "chains" / RUN_KEY).write_text(json.dumps(run_key(cfg, problem), indent=1))
+    return problem, ls.to_dict(), proposal, None
+
+
+def _write_outputs(cfg: RunConfig, problem, chains, ls_dict: dict, throws, steps, out: Path, t0: float):
+    """The "outputs" stage: summary.json, posterior.nc and run_info.json (its history of sampling sessions
+    extended on resume). Returns (summary, run_info)."""
+    with stage("outputs", "summary.json, posterior.nc, run_info.json"):
+        info = {"name": cfg.name, "config": str(cfg.path), "flights": flight_info(problem),
+                "sampler_settings": asdict(cfg.sampler), "markers": cfg.markers, "noise": noise_info(problem)}
+        if (out / FLAGGED).is_file() and robust_flights(problem):
+            flags = json.loads((out / FLAGGED).read_text())
+            info["flagged"] = {"file": FLAGGED, "outliers": sum(len(f["outliers"]) for f in flags.values()),
+                               "swaps": sum(len(f["swaps"]) for f in flags.values())}
+        if throws:
+            info["inertial_throws"] = {t.name: t.to_dict() for t in throws}
+        idata = build_inference_data(problem, chains, np.random.default_rng(cfg.sampler.seed))
+        with writing_posterior(idata, out / "posterior.nc", background=cfg.sampler.processes > 1):
+            summary = build_summary(problem, chains, idata, ls_dict, info, threads=cfg.sampler.processes)
+            (out / "summary.json").write_text(json.dumps(summary, indent=1))
+        previous = out / "run_info.json"
+        sessions = json.loads(previous.read_text()).get("sessions", []) if steps is not None and previous.is_file() else []
+        session = {"resumed_from_steps": steps, "total_steps": chains.total_steps,
+                   "wall_time_s": time.perf_counter() - t0}
+        run_info = {"wall_time_s": session["wall_time_s"], "sampling_wall_time_s": chains.wall_time_s,
+                    "history": chains.history, "sessions": sessions + [session], "versions": software_versions()}
+        previous.write_text(json.dumps(run_info, indent=1))
+    return summary, run_info
+
+
 def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> dict:
     """Least squares, emcee, and the run files ``summary.json``, ``posterior.nc``, ``run_info.json``.
 
@@ -343,43 +417,8 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
     t0 = time.perf_counter()
     out = Path(cfg.output)
     out.mkdir(parents=True, exist_ok=True)
-    with stage("reading flights and checks") as st:
-        throws = load_run_throws(cfg) if cfg.imu else []
-        problem = raw = build_problem(cfg, throws=throws)
-        if resume and robust_flights(problem) and (out / FLAGGED).is_file() and (out / "chains" / RUN_KEY).is_file():
-            problem = with_saved_flags(problem, out)
-            logger.info(f"resume: the saved judgement of outliers and label swaps ({out / FLAGGED}) is applied")
-        st.result = f"{cfg.name}: {data_words(problem)}, {problem.dim} parameters"
-        if noise_info(problem):
-            logger.info(f"marker noise: {noise_words(noise_info(problem))}")
-        for t in throws:
-            if t.status != "ok":
-                logger.info(f"{t.name}: {t.status}: {t.reason}")
-    if resume and (out / "chains" / RUN_KEY).is_file():
-        check_same_run(cfg, problem, out)       # before counting chain files: the ensembles may differ
-    steps = saved_steps(out, cfg.sampler.ensembles) if resume else None
-    if resume and steps is None:
-        logger.warning(f"--resume: no chain files in {out / 'chains'}; starting a fresh run")
-    if steps is not None:
-        check_same_run(cfg, problem, out)
-        logger.info(_resume_message(cfg.name, steps))
-        ls_dict = saved_least_squares(out)
-        if ls_dict is None:
-            logger.warning(f"resume: the least-squares files ({', '.join(LEAST_SQUARES_FILES)}) are not all in "
-                           f"{out}; recomputing least squares")
-            _, ls_dict = _least_squares(problem, cfg, out)
-        else:
-            logger.info(f"resume: reusing the saved least-squares optimum (cost {ls_dict['cost']:.1f}) and the "
-                        "proposals saved with the chains")
-        proposal = None  # the sampler continues with the approximation saved beside its chains
-    else:
-        ls, ls_dict = _least_squares(problem, cfg, out)
-        problem, ls, ls_dict = _robust(problem, ls, ls_dict, cfg, out)
-        proposal, ls = posterior_approximation(problem, ls, cfg.sampler.processes, out, progress=progress,
-                                               max_nfev=cfg.least_squares.max_nfev)
-        ls_dict = ls.to_dict()
-        (out / "chains").mkdir(exist_ok=True)
-        (out / "chains" / RUN_KEY).write_text(json.dumps(run_key(cfg, problem), indent=1))
+    throws, raw, problem = _read_problem(cfg, out, resume)
+    problem, ls_dict, proposal, steps = _prepare_sampling(cfg, problem, out, resume, progress)
     s = cfg.sampler
     with stage("sampling", f"{s.ensembles} ensembles × {n_walkers(s, problem)} walkers until R-hat < {s.rhat:g}, "
                            f"ESS ≥ {s.ess:g}, N/τ ≥ {s.n_tau:g} (cap {s.max_steps} steps)") as st:
@@ -387,32 +426,13 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
         st.result = f"{chains.reason} at step {chains.total_steps}"
     if robust_flights(raw):
         _average_over_judgement(raw, problem, chains, cfg, out)
-    with stage("outputs", "summary.json, posterior.nc, run_info.json"):
-        info = {"name": cfg.name, "config": str(cfg.path), "flights": flight_info(problem),
-                "sampler_settings": asdict(cfg.sampler), "markers": cfg.markers, "noise": noise_info(problem)}
-        if (out / FLAGGED).is_file() and robust_flights(problem):
-            flags = json.loads((out / FLAGGED).read_text())
-            info["flagged"] = {"file": FLAGGED, "outliers": sum(len(f["outliers"]) for f in flags.values()),
-                               "swaps": sum(len(f["swaps"]) for f in flags.values())}
-        if throws:
-            info["inertial_throws"] = {t.name: t.to_dict() for t in throws}
-        idata = build_inference_data(problem, chains, np.random.default_rng(cfg.sampler.seed))
-        with writing_posterior(idata, out / "posterior.nc", background=cfg.sampler.processes > 1):
-            summary = build_summary(problem, chains, idata, ls_dict, info, threads=cfg.sampler.processes)
-            (out / "summary.json").write_text(json.dumps(summary, indent=1))
-        previous = out / "run_info.json"
-        sessions = json.loads(previous.read_text()).get("sessions", []) if steps is not None and previous.is_file() else []
-        session = {"resumed_from_steps": steps, "total_steps": chains.total_steps,
-                   "wall_time_s": time.perf_counter() - t0}
-        run_info = {"wall_time_s": session["wall_time_s"], "sampling_wall_time_s": chains.wall_time_s,
-                    "history": chains.history, "sessions": sessions + [session], "versions": software_versions()}
-        previous.write_text(json.dumps(run_info, indent=1))
+    summary, run_info = _write_outputs(cfg, problem, chains, ls_dict, throws, steps, out, t0)
     logger.info(format_table(summary), extra=RESULT)
     c = summary["convergence"]
     logger.info(f"{c['reason']}: {c['total_steps']} steps × {c['walkers_per_ensemble']} walkers × {c['ensembles']} "
-        f"ensembles, burn-in {c['burn_in_steps']}, τ max {c['tau_max_steps']:.1f}, N/τ {c['n_over_tau']:.0f}, "
-        f"R-hat max {c['r_hat_max']:.4f}, min coefficient ESS {c['ess_bulk_min_coefficient']:.0f}; "
-        f"{run_info['wall_time_s']:.0f} s", extra=RESULT)
+                f"ensembles, burn-in {c['burn_in_steps']}, τ max {c['tau_max_steps']:.1f}, N/τ {c['n_over_tau']:.0f}, "
+                f"R-hat max {c['r_hat_max']:.4f}, min coefficient ESS {c['ess_bulk_min_coefficient']:.0f}; "
+                f"{run_info['wall_time_s']:.0f} s", extra=RESULT)
     logger.info(f"wrote {out / 'summary.json'}, {out / 'posterior.nc'}")
     return summary
 

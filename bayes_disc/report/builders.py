@@ -1,7 +1,7 @@
 """The standard list of section builders, in report order (see :mod:`.sections` for the protocol)."""
 from __future__ import annotations
 
-from . import content
+from . import content, findings
 from .answer import answer_section
 from .inertial import inertial_section
 from .sections import SectionBuilder
@@ -17,8 +17,9 @@ def default_builders() -> list[SectionBuilder]:
         :class:`~.context.ReportContext` to a :class:`~.sections.Section` or None.
     """
     return [answer_section, content.coefficient_table, content.corner_section, content.convergence_section,
-            content.residual_section, content.flagged_section, content.flight_section, inertial_section, content.force_curve_section,
-            content.identifiability_section, content.missing_physics_section, content.appendix_section]
+            content.residual_section, findings.flagged_section, content.flight_section, inertial_section,
+            content.force_curve_section, findings.identifiability_section, findings.missing_physics_section,
+            content.appendix_section]
 
 
 #: section ids of :func:`default_builders`, in order

@@ -8,7 +8,7 @@ passing ``builders=default_builders() + [my_builder]`` (or inserting it where it
 :func:`~.run.build_report`, without touching the rest of the report.
 
 This module holds only the building blocks; it imports none of the section builders (:mod:`.content`
-imports it), so the report's modules import one way: sections → content → builders → run.
+imports it), so the report's modules import one way: sections → content → findings → builders → run.
 """
 from __future__ import annotations
 
