@@ -297,6 +297,9 @@ def synthesize(spec: SynthSpec) -> SynthResult:
     -------
     SynthResult
         Flights (with per-point ``sigma`` [m] when any flight has a ``sigma_m`` defect) and the truth.
+
+    Long: the random draws happen in one fixed order (simulation, noise, dropout, defects per flight), which
+    fixes every data set a seed makes.
     """
     rng = np.random.default_rng(spec.seed)
     ids = tuple(spec.markers)

@@ -170,7 +170,10 @@ def integrate(y0, coef, ext, k, t0, times, marker_body, step_factor, omega_cap, 
 
     Each lane takes ⌈T ω_c / c⌉ equal substeps per segment (:mod:`.kernel` docstring); fixed_rate > 0 fixes
     ω_c = fixed_rate for every lane (results smooth in the parameters) and flags lanes whose own ω_c
-    exceeds rate_margin · fixed_rate instead of omega_cap."""
+    exceeds rate_margin · fixed_rate instead of omega_cap.
+
+    Long: one compiled loop over lanes and segments whose substep control, outputs and status share registers
+    (numba: splitting it into calls costs per-substep overhead)."""
     B = y0.shape[0]
     n = times.shape[0]
     nm = marker_body.shape[0]

@@ -154,7 +154,10 @@ def _measure(signal: np.ndarray, raw: np.ndarray, labels: np.ndarray, stats: np.
     """Centroids of the components of ``labels`` inside one region (offset x_off, y_off in the frame).
 
     Returns the blobs and, for each, whether it touches the region border where the region is not the
-    frame border (then the caller must grow the region)."""
+    frame border (then the caller must grow the region).
+
+    Long: one pass over the components whose split, edge and saturation decisions share each blob's window
+    and background."""
     H, W = signal.shape
     fh, fw = frame_shape
     out = {k: [] for k in ("uv", "area", "flux", "peak", "el", "flags", "cut")}

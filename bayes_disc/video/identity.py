@@ -220,7 +220,9 @@ def label_frame(cameras: list[Camera], blob_uv: list, layout: np.ndarray, cfg: I
                 predictions=None, pred_sigma=None) -> FrameLabels:
     """Label one frame. blob_uv: per camera, usable blob centroids (n_c, 2) [px]; layout (M, 3):
     body-frame marker positions [m]; predictions (M, 3) with NaN rows for markers without prediction,
-    pred_sigma (M,) [m] (None: acquisition without prediction)."""
+    pred_sigma (M,) [m] (None: acquisition without prediction).
+
+    Long: acquisition and tracking share the candidate search and the assignment's bookkeeping."""
     M, C = len(layout), len(cameras)
     tracking = predictions is not None and np.any(np.all(np.isfinite(predictions), axis=1))
     gate = None

@@ -235,7 +235,9 @@ def load_calibration(sec: Section) -> tuple[dict, str]:
 
 
 def parse_track_config(path) -> TrackConfig:
-    """Read and check a TRACK.yaml (unknown keys are errors naming the key)."""
+    """Read and check a TRACK.yaml (unknown keys are errors naming the key).
+
+    Long: one validation pass over the file's keys, in the order their errors are reported."""
     path = Path(path)
     sec = Section(path, load_yaml(path))
     flight = sec.string("flight", path.stem)
