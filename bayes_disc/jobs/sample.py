@@ -194,9 +194,9 @@ def flag_lines(flags: dict) -> list[str]:
 
 
 def _robust(problem, ls, ls_dict: dict, cfg: RunConfig, out: Path):
-    """For ``robust`` marker noise: judge, clean and refit (:func:`.robust.robust_refit`), write
+    """For ``robust`` marker noise: judge, clean and refit (:func:`bayes_disc.inference.fitting.robust.robust_refit`), write
     ``flagged.json`` and the refined least-squares files, log every flag. Flights with plain Gaussian noise
-    whose data look as if they hold gross errors get a warning with the fix (:func:`.robust.gross_error_advice`)."""
+    whose data look as if they hold gross errors get a warning with the fix (:func:`bayes_disc.inference.fitting.robust.gross_error_advice`)."""
     advice = gross_error_advice(suspected_gross_errors(problem, ls.theta))
     if advice is not None:
         logger.warning(advice)
@@ -217,7 +217,7 @@ def _robust(problem, ls, ls_dict: dict, cfg: RunConfig, out: Path):
 
 
 def _average_over_judgement(raw, problem, chains, cfg: RunConfig, out: Path) -> None:
-    """The posterior averaged over the judgement of outliers and swaps (:func:`.robust.average_over_judgement`):
+    """The posterior averaged over the judgement of outliers and swaps (:func:`bayes_disc.inference.fitting.robust.average_over_judgement`):
     written to ``judgement_average.json`` and logged."""
     names = problem.names[: problem.n_coef + problem.n_ext]
     with stage("averaging over the judgement", "reweighting draws to the inlier/outlier/swap mixture likelihood") as st:
@@ -233,11 +233,11 @@ def _average_over_judgement(raw, problem, chains, cfg: RunConfig, out: Path) -> 
 
 def posterior_approximation(problem, ls, processes: int, out: Path, progress: bool = False, max_nfev: int = 200):
     """Profile paths of the coefficients through the least-squares optimum and the ridge-aware
-    independence proposal built from them (:func:`.proposals.independence_proposal`).
+    independence proposal built from them (:func:`bayes_disc.inference.sampling.proposals.independence_proposal`).
 
     A profile that reaches a lower cost than the optimum shows the optimum was not the lowest point (a local
     optimum, or a fit stopped short of it): the least squares are refitted from that point and the profiles
-    start again (:func:`.profile.profiles_through_lowest`); the least-squares files are rewritten and a warning
+    start again (:func:`bayes_disc.inference.fitting.profile.profiles_through_lowest`); the least-squares files are rewritten and a warning
     names the profile.
 
     Parameters
