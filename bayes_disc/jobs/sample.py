@@ -11,8 +11,8 @@ of the progress toward convergence while sampling (on a terminal; log lines othe
 table and the convergence line are INFO records marked ``result=True`` (the command line prints those
 on stdout).
 
-``resume=True`` continues from the chain files (:func:`bayes_disc.inference.sampling.sampler.run_sampler`) with the saved least-squares
-result and proposals; it refuses a configuration that no longer describes the saved run
+``resume=True`` continues from the chain files (:func:`bayes_disc.inference.sampling.sampler.run_sampler`) with
+the saved least-squares result and proposals; it refuses a configuration that no longer describes the saved run
 (:func:`check_same_run`).
 """
 from __future__ import annotations
@@ -194,9 +194,11 @@ def flag_lines(flags: dict) -> list[str]:
 
 
 def _robust(problem, ls, ls_dict: dict, cfg: RunConfig, out: Path):
-    """For ``robust`` marker noise: judge, clean and refit (:func:`bayes_disc.inference.fitting.robust.robust_refit`), write
-    ``flagged.json`` and the refined least-squares files, log every flag. Flights with plain Gaussian noise
-    whose data look as if they hold gross errors get a warning with the fix (:func:`bayes_disc.inference.fitting.robust.gross_error_advice`)."""
+    """For ``robust`` marker noise: judge, clean and refit
+    (:func:`bayes_disc.inference.fitting.robust.robust_refit`), write ``flagged.json`` and the refined
+    least-squares files, log every flag. Flights with plain Gaussian noise whose data look as if they hold
+    gross errors get a warning with the fix
+    (:func:`bayes_disc.inference.fitting.robust.gross_error_advice`)."""
     advice = gross_error_advice(suspected_gross_errors(problem, ls.theta))
     if advice is not None:
         logger.warning(advice)
@@ -217,7 +219,8 @@ def _robust(problem, ls, ls_dict: dict, cfg: RunConfig, out: Path):
 
 
 def _average_over_judgement(raw, problem, chains, cfg: RunConfig, out: Path) -> None:
-    """The posterior averaged over the judgement of outliers and swaps (:func:`bayes_disc.inference.fitting.robust.average_over_judgement`):
+    """The posterior averaged over the judgement of outliers and swaps
+    (:func:`bayes_disc.inference.fitting.robust.average_over_judgement`):
     written to ``judgement_average.json`` and logged."""
     names = problem.names[: problem.n_coef + problem.n_ext]
     with stage("averaging over the judgement", "reweighting draws to the inlier/outlier/swap mixture likelihood") as st:
@@ -237,8 +240,8 @@ def posterior_approximation(problem, ls, processes: int, out: Path, progress: bo
 
     A profile that reaches a lower cost than the optimum shows the optimum was not the lowest point (a local
     optimum, or a fit stopped short of it): the least squares are refitted from that point and the profiles
-    start again (:func:`bayes_disc.inference.fitting.profile.profiles_through_lowest`); the least-squares files are rewritten and a warning
-    names the profile.
+    start again (:func:`bayes_disc.inference.fitting.profile.profiles_through_lowest`); the least-squares files are
+    rewritten and a warning names the profile.
 
     Parameters
     ----------
@@ -378,7 +381,8 @@ def _write_outputs(cfg: RunConfig, problem, chains, ls_dict: dict, throws, steps
             summary = build_summary(problem, chains, idata, ls_dict, info, threads=cfg.sampler.processes)
             (out / "summary.json").write_text(json.dumps(summary, indent=1))
         previous = out / "run_info.json"
-        sessions = json.loads(previous.read_text()).get("sessions", []) if steps is not None and previous.is_file() else []
+        resumed = steps is not None and previous.is_file()
+        sessions = json.loads(previous.read_text()).get("sessions", []) if resumed else []
         session = {"resumed_from_steps": steps, "total_steps": chains.total_steps,
                    "wall_time_s": time.perf_counter() - t0}
         run_info = {"wall_time_s": session["wall_time_s"], "sampling_wall_time_s": chains.wall_time_s,
@@ -430,8 +434,8 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
     logger.info(format_table(summary), extra=RESULT)
     c = summary["convergence"]
     logger.info(f"{c['reason']}: {c['total_steps']} steps × {c['walkers_per_ensemble']} walkers × {c['ensembles']} "
-                f"ensembles, burn-in {c['burn_in_steps']}, τ max {c['tau_max_steps']:.1f}, N/τ {c['n_over_tau']:.0f}, "
-                f"R-hat max {c['r_hat_max']:.4f}, min coefficient ESS {c['ess_bulk_min_coefficient']:.0f}; "
+                f"ensembles, burn-in {c['burn_in_steps']}, τ max {c['tau_max_steps']:.1f}, "
+                f"N/τ {c['n_over_tau']:.0f}, R-hat max {c['r_hat_max']:.4f}, min coefficient ESS {c['ess_bulk_min_coefficient']:.0f}; "
                 f"{run_info['wall_time_s']:.0f} s", extra=RESULT)
     logger.info(f"wrote {out / 'summary.json'}, {out / 'posterior.nc'}")
     return summary
