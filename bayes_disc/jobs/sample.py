@@ -436,7 +436,8 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
     logger.info(f"{c['reason']}: {c['total_steps']} steps × {c['walkers_per_ensemble']} walkers × {c['ensembles']} "
                 f"ensembles, burn-in {c['burn_in_steps']}, τ max {c['tau_max_steps']:.1f}, "
                 f"N/τ {c['n_over_tau']:.0f}, R-hat max {c['r_hat_max']:.4f}, "
-                f"min coefficient ESS {c['ess_bulk_min_coefficient']:.0f}; {run_info['wall_time_s']:.0f} s", extra=RESULT)
+                f"min coefficient ESS {c['ess_bulk_min_coefficient']:.0f}; "
+                f"{run_info['wall_time_s']:.0f} s", extra=RESULT)
     logger.info(f"wrote {out / 'summary.json'}, {out / 'posterior.nc'}")
     return summary
 
