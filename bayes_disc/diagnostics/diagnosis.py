@@ -12,6 +12,9 @@ Writes into the run's output folder:
   ``peak_height_m``), the noise floor the shares refer to (``noise_floor``: σ̂ per noise group from second
   differences), ``partial_explanation`` ({ids, share_explained, evidence} when the adopted terms only
   partly explain the data, else null), the candidates skipped (with the reason) and the diagnosis in words;
+* ``wobble`` in ``diagnosis.json``: per inertial throw, the transverse gyro rates of the data and of the base
+  fit split into nutation (κ × spin in the body), precession (fixed in space) and a part fixed in sensor
+  axes, in sliding windows, compared in words (:mod:`.wobble`); null for a run without inertial throws;
 * ``learned_discrepancy`` in ``diagnosis.json``: when the base model leaves structure, a sparse correction
   in functions of height, α and spin learned without assuming a formula (:mod:`.discrepancy`): what it
   selected, whether it whitens the residuals, the flight variable and family it names, and its curve
@@ -56,6 +59,7 @@ from .missing_physics import (CANDIDATES, EVIDENCE_THRESHOLD, SHARE_PARTIAL, Dia
 from .mismatch import describe_where, fingerprint
 from .mismatch import SERIES_WORDS, onset_of_mismatch, onset_unavailable
 from .residuals import noise_floor, peak_window
+from .wobble import wobble_records
 
 logger = logging.getLogger(__name__)
 #: a base coefficient "moved" when the refit shifts it by more than this many base standard deviations
@@ -229,6 +233,7 @@ def words(result: dict) -> str:
                      + (f" and no candidate earns its place (ΔBIC > {EVIDENCE_THRESHOLD:.0f} with white residuals; "
                         f"best: {best['id']}, ΔBIC {best['evidence']:.1f})." if best else "."))
         lines.append("RMS " + rms_text(before) + ".")
+        lines += [w["words"] for w in (result.get("wobble") or {}).values()]
         if skipped:
             lines.append("Not tried: " + ", ".join(f"{c} ({why})" for c, why in skipped.items()) + ".")
         return "\n".join(lines)
@@ -271,6 +276,7 @@ def words(result: dict) -> str:
     learned = learned_words(result)
     if learned:
         lines.append(learned)
+    lines += [w["words"] for w in (result.get("wobble") or {}).values()]
     if skipped:
         lines.append("Not tried: " + ", ".join(f"{c} ({why})" for c, why in skipped.items()) + ".")
     return "\n".join(lines)
@@ -717,6 +723,7 @@ def diagnosis_record(analysis: Analysis, before_est: dict, after_est: dict, refi
                                     log=logger.info)
         result["learned_discrepancy"] = learned_record(learned, diag) if learned is not None else {
             "selected": 0, "reason": f"no column of the correction reaches |z| ≥ {Z_KEEP:.0f}"}
+    result["wobble"] = wobble_records(base.problem, base.ls.theta) or None
     result["words"] = words(result)
     return result
 

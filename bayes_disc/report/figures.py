@@ -471,3 +471,44 @@ def learned_curve_figure(curve: dict, generating: np.ndarray | None = None, gene
     ax.legend(fontsize=8, frameon=False)
     fig.subplots_adjust(left=0.13, right=0.97, top=0.95, bottom=0.14)
     return fig
+
+
+def wobble_figure(records: dict) -> Figure:
+    """The wobble of each throw (one column per throw), data (dots) against model (line): κ, the nutation
+    rate over the spin [1], with the torque-free rigid disc's (Ia − Id)/Id dashed (top); the amplitudes of
+    the nutation (log scale), of the space-fixed part and of the sensor-fixed part [rad/s] (bottom).
+
+    Parameters
+    ----------
+    records : dict
+        ``diagnosis.json``'s ``wobble``: {throw: {series: {data, model: {time_s, kappa, nutation_rad_s,
+        space_fixed_rad_s, constant_rad_s} (m,) lists}, torque_free_kappa}}.
+    """
+    n = len(records)
+    fig = new_figure(max(6.0, 3.6 * n), 5.6)
+    axes = fig.subplots(2, n, squeeze=False, sharex="col")
+    for c, (name, rec) in enumerate(records.items()):
+        top, bottom = axes[0, c], axes[1, c]
+        for who, style, colour in (("data", ".", "tab:blue"), ("model", "-", "k")):
+            s = rec["series"][who]
+            t = np.asarray(s["time_s"], float)
+            top.plot(t, np.asarray(s["kappa"], float), style, ms=4, color=colour, label=f"{who} κ" if c == 0 else None)
+            for key, col, lab in (("nutation_rad_s", colour, "nutation"), ("space_fixed_rad_s", "tab:orange", "space-fixed"),
+                                  ("constant_rad_s", "tab:green", "sensor-fixed")):
+                bottom.plot(t, np.asarray(s[key], float), style, ms=3, lw=1.0,
+                            color=colour if key == "nutation_rad_s" else col, alpha=1.0 if who == "data" else 0.7,
+                            label=f"{who} {lab}" if c == 0 else None)
+        top.axhline(rec["torque_free_kappa"], color="0.5", ls="--", lw=0.8,
+                    label="torque-free (Ia − Id)/Id" if c == 0 else None)
+        bottom.set_yscale("log")
+        top.set_title(name, fontsize=10)
+        bottom.set_xlabel("window centre, time since release [s]", fontsize=8)
+        for ax in (top, bottom):
+            ax.tick_params(labelsize=7)
+        if c == 0:
+            top.set_ylabel("κ = nutation rate / spin", fontsize=8)
+            bottom.set_ylabel("amplitude [rad/s]", fontsize=8)
+            top.legend(fontsize=7)
+            bottom.legend(fontsize=6, ncol=2)
+    fig.tight_layout()
+    return fig

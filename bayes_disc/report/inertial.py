@@ -91,6 +91,17 @@ def inertial_section(ctx) -> Section | None:
                     "plane (acc x, y: dominated by the centripetal acceleration of the off-centre sensor)."),
             _figure(ctx, _residual_figure(ctx, data, None), "inertial_residuals",
                     "Measured − model for the gyro and the accelerometer, sensor axes, per throw.")]
+    wobble = (ctx.run.extras.get("diagnosis") or {}).get("wobble")
+    if wobble:
+        from .figures import wobble_figure
+        window = next(iter(wobble.values()))
+        figs.append(_figure(ctx, wobble_figure(wobble), "inertial_wobble",
+                            "The wobble of each throw, from diagnosis.json: the transverse gyro rates g_x + i g_y fitted "
+                            f"in sliding {window['window_s']:.2f} s windows by a nutation phasor turning at κ × spin in "
+                            "the body, a space-fixed (precession) phasor and a part fixed in sensor axes. Top: κ of the "
+                            "data (dots) and of the model (line), the torque-free rigid disc's (Ia − Id)/Id dashed; "
+                            "bottom: the three amplitudes. "
+                            + " ".join(r["words"] for r in wobble.values())))
     rows = [_param_row(p, "imu_offset_x", "sensor position r_s, b1", 1e3, "mm"),
             _param_row(p, "imu_offset_y", "sensor position r_s, b2", 1e3, "mm"),
             _param_row(p, "imu_offset_z", "sensor position r_s, b3", 1e3, "mm"),
