@@ -90,7 +90,9 @@ def default_matches(cell: str, default) -> bool:
     m = re.match(r"`([^`]*)`", cell)
     if m is None:
         return False
-    if isinstance(default, (int, float)) and not isinstance(default, bool):
+    if isinstance(default, bool):                      # YAML's spelling
+        return m.group(1) == ("true" if default else "false")
+    if isinstance(default, (int, float)):
         try:
             return math.isclose(float(m.group(1)), float(default), rel_tol=1e-12, abs_tol=0.0)
         except ValueError:

@@ -123,9 +123,13 @@ def test_real_logs_enter_a_run_and_the_hammer_is_out_of_model():
     for n in ("imu_offset_x", "imu_offset_y", "imu_offset_z", "imu_lpf_tau", "imu_period_2025-08-31-002-rb"):
         assert n in names
     assert not any(n.startswith(("x_", "y_", "z_")) for n in names)     # position is not a parameter
-    assert len(p.sigma_names) == 12
+    assert len(p.sigma_names) == 18                  # per throw: gyro and acc (axial, transverse), magnetometer
+    assert "mag_heading_2025-08-31-002-rb" in names and "mag_field_horizontal" in names
     r, ok = p.residuals(p.start_vector()[None], 1)
     assert ok[0] and np.all(np.isfinite(r))
+    from dataclasses import replace
+    off = build_problem(cfg, throws=[replace(t, magnetometer=False) for t in throws])
+    assert len(off.sigma_names) == 12 and not any(n.startswith("mag_") for n in off.names)
 
 
 @pytest.mark.slow

@@ -148,6 +148,14 @@ class Section:
             raise ConfigError(self.path, self.key(name), f"must be one of {list(choices)}, got {v!r}")
         return v
 
+    def boolean(self, name: str, default=None, required=False):
+        v = self.raw(name, default, required)
+        if v is None:
+            return None
+        if not isinstance(v, bool):
+            raise ConfigError(self.path, self.key(name), f"must be true or false, got {v!r}")
+        return v
+
     def section(self, name: str) -> "Section":
         return Section(self.path, self.raw(name, {}), self.key(name))
 

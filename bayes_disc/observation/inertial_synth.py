@@ -5,8 +5,12 @@ Computed independently of the fitting path (:mod:`.models.inertial`): the flight
 readable equations of motion (:func:`bayes_disc.physics.state_derivative`, exact) instead of finite
 differences; the on-chip filter τ dy/dt = x − y is integrated on that fine grid; rows are read at
 t_i = i·P directly (no interpolation). Noise: Gaussian, per sensor axis group (axial z, transverse x, y).
-A magnetometer reading of a fixed world field rotated into sensor axes is written too, so the time base
-can be cross-checked on synthetic logs as on real ones.
+
+The magnetometer follows the model of :mod:`.models.magnetometer`: a fixed world field B_w rotated into
+sensor axes, averaged over the window [t_i − 2 T_m, t_i] (here by the trapezoidal rule on the fine grid,
+the cumulative integral read linearly between its points; before release the disc is at its release
+attitude), plus the hard-iron offset h and Gaussian noise per axis group (none by default, so that the
+default logs draw the same random numbers for gyro and accelerometer as without it).
 """
 from __future__ import annotations
 
@@ -18,6 +22,7 @@ from ..physics import Coefficients, Disc, Environment, simulate, state_derivativ
 from ..physics.frames import quat_to_matrix
 from .imu.formats import InertialLog
 from .models.inertial import low_pass, sensor_rotation
+from .models.magnetometer import MAG_WINDOW
 
 #: fine-grid points per row period
 SUBSTEPS = 16
@@ -44,7 +49,11 @@ class LoggerSpec:
     lpf_state : (3,) tuple or None
         Filter state at release [m/s²]; None: the filter input at release (settled filter).
     field_uT : (3,) tuple
-        World magnetic field [µT].
+        World magnetic field [µT] (x, y horizontal, z up: the northern hemisphere's field has z < 0).
+    mag_hard_iron : (3,) tuple
+        Magnetometer hard-iron offset h in sensor axes [µT].
+    mag_noise : (2,) tuple
+        Magnetometer noise sd (axial z, transverse x/y) [µT].
     """
 
     offset: tuple = (0.02, 0.0, -0.01)
@@ -57,6 +66,8 @@ class LoggerSpec:
     acc_bias: tuple = (0.0, 0.0, 0.0)
     lpf_state: tuple | None = None
     field_uT: tuple = (20.0, 0.0, -40.0)
+    mag_hard_iron: tuple = (0.0, 0.0, 0.0)
+    mag_noise: tuple = (0.0, 0.0)
     truth: dict = field(default_factory=dict, compare=False)
 
 
@@ -105,8 +116,36 @@ def logger_readings(initial_state: np.ndarray, coefficients: Coefficients, n_row
     rows = np.arange(n_rows) * SUBSTEPS
     R_rows = quat_to_matrix(states[rows, 6:10])
     gyro = states[rows, 10:13] @ C.T + np.asarray(spec.gyro_bias, float)
-    mag = np.einsum("ij,njk,k->ni", C, np.transpose(R_rows, (0, 2, 1)), np.asarray(spec.field_uT, float))
+    b_body = np.einsum("njk,k->nj", np.transpose(quat_to_matrix(states[:, 6:10]), (0, 2, 1)),
+                       np.asarray(spec.field_uT, float))
+    mag = window_average(b_body, h, times[rows]) @ C.T + np.asarray(spec.mag_hard_iron, float)
     return gyro, acc[rows] + np.asarray(spec.acc_bias, float), mag, states[rows]
+
+
+def window_average(f: np.ndarray, h: float, t: np.ndarray) -> np.ndarray:
+    """Mean of f over [t − w, t] (w = :data:`~.models.magnetometer.MAG_WINDOW`), f held at f[0] before
+    the grid's start.
+
+    Parameters
+    ----------
+    f : (J, 3) array
+        Signal on the grid j·h.
+    h : float
+        Grid step [s].
+    t : (n,) array
+        Window ends [s], on the grid's span.
+
+    Returns
+    -------
+    (n, 3) array
+    """
+    cum = np.concatenate([np.zeros((1, 3)), np.cumsum(0.5 * (f[1:] + f[:-1]) * h, axis=0)])
+    grid = np.arange(f.shape[0]) * h
+
+    def integral(x):                       # ∫_0^x f dt, with f = f[0] for x < 0
+        inside = np.column_stack([np.interp(np.maximum(x, 0.0), grid, cum[:, c]) for c in range(3)])
+        return inside + np.minimum(x, 0.0)[:, None] * f[0]
+    return (integral(t) - integral(t - MAG_WINDOW)) / MAG_WINDOW
 
 
 def synthetic_log(name: str, initial_state: np.ndarray, coefficients: Coefficients, duration: float,
@@ -123,6 +162,7 @@ def synthetic_log(name: str, initial_state: np.ndarray, coefficients: Coefficien
     as_ = np.array([spec.acc_noise[1], spec.acc_noise[1], spec.acc_noise[0]])
     gyro = gyro + rng.normal(0.0, 1.0, gyro.shape) * gs
     acc = acc + rng.normal(0.0, 1.0, acc.shape) * as_
+    mag = _mag_noise(mag, spec, rng)
     rows = np.arange(n_rows)
     return InertialLog(name=name, source="synth", fmt="imu-csv" if timed else "flatball-ins", rows=rows,
                        lines=rows + 2, gyro=gyro, acc=acc, mag=mag, pressure=None,
@@ -137,6 +177,14 @@ BARO_AIR_DENSITY = 1.2
 BARO_TASK_PERIOD = 0.105
 #: sd [Pa] of the synthetic barometer's reading noise (every update differs from the previous one)
 BARO_NOISE_PA = 1.0
+
+
+def _mag_noise(mag: np.ndarray, spec: LoggerSpec, rng: np.random.Generator) -> np.ndarray:
+    """mag (n, 3) [µT] plus Gaussian noise (axial, transverse sd of ``spec.mag_noise``); no draw without noise."""
+    if not any(spec.mag_noise):
+        return mag
+    sd = np.array([spec.mag_noise[1], spec.mag_noise[1], spec.mag_noise[0]])
+    return mag + rng.normal(0.0, 1.0, mag.shape) * sd
 
 
 def rest_readings(quaternion: np.ndarray, spec: LoggerSpec, g: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -161,7 +209,7 @@ def rest_readings(quaternion: np.ndarray, spec: LoggerSpec, g: float) -> tuple[n
     R = quat_to_matrix(np.asarray(quaternion, float))
     gyro = np.asarray(spec.gyro_bias, float).copy()
     acc = C @ R.T @ np.array([0.0, 0.0, g]) + np.asarray(spec.acc_bias, float)
-    mag = C @ R.T @ np.asarray(spec.field_uT, float)
+    mag = C @ R.T @ np.asarray(spec.field_uT, float) + np.asarray(spec.mag_hard_iron, float)
     return gyro, acc, mag
 
 
@@ -174,7 +222,7 @@ class RecordedThrow:
     log : InertialLog
         The whole recording (``rows`` the logger's step counter, ``times`` None: a flatball-ins log).
     clean : InertialLog
-        The same rows without sensor noise (gyro, acc; the magnetometer is noise-free in both).
+        The same rows without sensor noise.
     release_row : int
         Logger row of the release (first row of free flight, t = 0).
     end_row : int
@@ -258,11 +306,13 @@ def recorded_throw(name: str, initial_state: np.ndarray, coefficients: Coefficie
     noisy_gyro = gyro + rng.normal(0.0, 1.0, gyro.shape) * gs
     noisy_acc = acc + rng.normal(0.0, 1.0, acc.shape) * as_
     pressure = _barometer(heights, spec.period, rng, env.g)
+    noisy_mag = _mag_noise(mag, spec, rng)
     rows = first_row + np.arange(gyro.shape[0])
 
-    def make(gy, ac):
+    def make(gy, ac, mg):
         return InertialLog(name=name, source="synth", fmt="flatball-ins", rows=rows.copy(), lines=rows - first_row + 2,
-                           gyro=gy, acc=ac, mag=mag.copy(), pressure=pressure.copy(), times=None, repairs=[])
-    return RecordedThrow(log=make(noisy_gyro, noisy_acc), clean=make(gyro, acc), release_row=int(first_row + n_pre),
+                           gyro=gy, acc=ac, mag=mg.copy(), pressure=pressure.copy(), times=None, repairs=[])
+    return RecordedThrow(log=make(noisy_gyro, noisy_acc, noisy_mag), clean=make(gyro, acc, mag),
+                         release_row=int(first_row + n_pre),
                          end_row=int(first_row + n_pre + n_fly),
                          lpf_state=acc_f[0] - np.asarray(spec.acc_bias, float))

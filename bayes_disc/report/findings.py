@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from ..observation.models.inertial import SERIES as INERTIAL_SERIES, SERIES_UNITS as INERTIAL_UNITS
+from ..observation.models.magnetometer import MAG_SERIES
 from ..observation.models.markers import ROTATIONS
 from ..physics import TERMS, Disc
 from ..physics.discrepancy import coefficient_curve
@@ -89,7 +90,8 @@ SERIES_LABELS = {"along": ("along-track [mm]", 1e3), "lateral": ("lateral [mm]",
                  "d3": ("d3 [mm]", 1e3), "roll": ("roll [mrad]", 1e3), "pitch": ("pitch [mrad]", 1e3),
                  "spin_phase": ("spin phase [mrad]", 1e3),
                  **{s: (f"{'gyro' if s.startswith('gyro') else 'accelerometer'} {s[-1]} [{u}]", 1.0)
-                    for s, u in zip(INERTIAL_SERIES, INERTIAL_UNITS)}}
+                    for s, u in zip(INERTIAL_SERIES, INERTIAL_UNITS)},
+                 **{s: (f"magnetometer {s[-1]} [µT]", 1.0) for s in MAG_SERIES}}
 
 
 def _estimate_text(est: dict) -> str:

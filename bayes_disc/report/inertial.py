@@ -13,16 +13,15 @@ COLOURS = ("tab:blue", "tab:orange", "tab:green")
 
 
 def _predictions(ctx, k: int):
-    """(model, sample times [s] since release, measured (n, 6), predicted (n, 6)) of flight k's inertial
-    channel at the highest-posterior draw."""
+    """(model, sample times [s] since release, measured (n, c), predicted (n, c)) of flight k's inertial
+    channel at the highest-posterior draw (c = 6 gyro and accelerometer channels, 9 with the magnetometer)."""
     from ..observation.models.inertial import InertialMeasurements
     theta = ctx.theta_ref[None]
     preds, _ = ctx.problem.channel_predictions(theta, k)
     c, pred = next((c, p) for c, p in preds if isinstance(c, InertialMeasurements))
     period = c.split(theta[:, ctx.problem.channel_columns(k)[ctx.problem.channels[k].index(c)]])["period"]
     t = c.sample_times_for(period)[0]
-    measured = np.concatenate([c.log.gyro, c.log.acc], axis=1)
-    return c, t, measured, pred[0]
+    return c, t, c.measured, pred[0]
 
 
 def _throw_figure(ctx, data) -> Figure:

@@ -32,6 +32,7 @@ imu:                                     # inertial logs (instead of or besides 
   - file: data/2025-08-31-002-rb.csv
     format: flatball-ins                 # or imu-csv
     throws: [[1007, 1344]]               # optional: release and first-impact rows per throw (default: found)
+    magnetometer: true                   # use the log's magnetometer (default true when the log has one)
 credit: "where the data come from"       # shown in the report wherever the data are shown (licences)
 ```
 """
@@ -91,11 +92,13 @@ class FlightOption:
 
 @dataclass(frozen=True)
 class ImuSource:
-    """One inertial log of the run: file, format and optional explicit throws (logger rows, end exclusive)."""
+    """One inertial log of the run: file, format, optional explicit throws (logger rows, end exclusive) and
+    whether its magnetometer is used (when the log has one)."""
 
     file: Path
     format: str
     throws: tuple[tuple[int, int], ...] | None = None
+    magnetometer: bool = True
 
 
 
@@ -328,7 +331,8 @@ def _read_noise(path: Path, sec: Section, defaults: NoiseSettings | None) -> dic
 
 
 def _read_imu(path: Path, sec: Section) -> tuple[ImuSource, ...]:
-    """The ``imu:`` list: file (relative to the config), format, optional throws [[start, end], ...]."""
+    """The ``imu:`` list: file (relative to the config), format, optional throws [[start, end], ...],
+    ``magnetometer`` (default true)."""
     raw = sec.raw("imu", None)
     if raw is None:
         return ()
@@ -340,6 +344,7 @@ def _read_imu(path: Path, sec: Section) -> tuple[ImuSource, ...]:
         file = path.parent / e.string("file", required=True)
         fmt = e.string("format", required=True, choices=IMU_FORMATS)
         throws = e.raw("throws", None)
+        magnetometer = e.boolean("magnetometer", True)
         e.finish()
         if not file.is_file():
             raise ConfigError(path, f"imu[{i}].file", f"file not found: {file}")
@@ -351,5 +356,5 @@ def _read_imu(path: Path, sec: Section) -> tuple[ImuSource, ...]:
                 raise ConfigError(path, f"imu[{i}].throws", "must be a list of [release_row, end_row] integer pairs "
                                   "(end after release, at least 10 rows)")
             throws = tuple((int(a), int(b)) for a, b in throws)
-        out.append(ImuSource(file=file, format=fmt, throws=throws))
+        out.append(ImuSource(file=file, format=fmt, throws=throws, magnetometer=magnetometer))
     return tuple(out)

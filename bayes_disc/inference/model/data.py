@@ -10,9 +10,11 @@ from ...observation.registry import split_extensions
 from ...physics import SimulatorSettings
 from .config import RunConfig
 from ...observation.models import MarkerPositions
-from .inertial import inertial_model, level_start, load_run_throws, own_start, search_starts
+from ...observation.models.magnetometer import MAG_OWN_PARAMETERS
+from .inertial import (heading_start, inertial_model, level_start, load_run_throws, magnetometer_shared_start,
+                       own_start, search_starts)
 from .initial import initial_state_from_data
-from .problem import Problem
+from .problem import Problem, shared_observation_parameters
 
 
 def load_run_flights(cfg: RunConfig):
@@ -95,9 +97,10 @@ def build_problem(cfg: RunConfig, terms_override=None, flights=None, throws=None
     if not records:
         raise ConfigError(cfg.path, "imu", "no throw to fit (every inertial throw is out of the model)")
     given = {name: v for tid in ids for name, v in cfg.physics.get(tid, {}).items()}
-    shared = {c.id: c.shared_parameters for ch in observations for c in ch}
+    shared = shared_observation_parameters(observations)
     ext = ([q for t in terms for q in t.parameters] + [q for e in explanations for q in e.parameters_for(cfg.marker_ids)]
-           + [q for ps in shared.values() for q in ps])
+           + list(shared.values()))
+    given = {**magnetometer_shared_start(c for ch in observations for c in ch), **given}
     term_start = np.array([given.get(q.name, q.off_value) for q in ext], float)
 
     def make(start_states):
@@ -110,4 +113,10 @@ def build_problem(cfg: RunConfig, terms_override=None, flights=None, throws=None
         for k in inertial_only:
             starts[k] = search_starts(problem, k)
         problem = make(starts)
-    return problem
+    headed = False                    # each magnetometer's field heading, along its flight's start
+    for k in range(len(records)):
+        psi = heading_start(problem, k)
+        if np.isfinite(psi):
+            own[k][problem.layout.flight_parameters[k].index(MAG_OWN_PARAMETERS[0])] = psi
+            headed = True
+    return make(starts) if headed else problem

@@ -45,6 +45,7 @@ class InertialThrow:
     period_mag_gyro: float | None = None
     period_mag_gyro_sd: float | None = None
     repairs: list = field(default_factory=list)
+    magnetometer: bool = True        # the source allows its magnetometer to be used (when the log has one)
 
     @property
     def name(self) -> str:
@@ -73,7 +74,8 @@ def load_run_throws(cfg) -> list[InertialThrow]:
             for r in rec.repairs:
                 log.info("%s: repaired: %s", src.file.name, r)
             if rec.times is not None:          # imu-csv: each flight is a free flight from its first row
-                out.append(InertialThrow(rec, str(src.file), "ok", "timed log: whole flight", repairs=rec.repairs))
+                out.append(InertialThrow(rec, str(src.file), "ok", "timed log: whole flight", repairs=rec.repairs,
+                                         magnetometer=src.magnetometer))
                 continue
             segments = find_throws(rec, override=list(src.throws) if src.throws else None)
             if not segments:
@@ -95,7 +97,8 @@ def load_run_throws(cfg) -> list[InertialThrow]:
                         "reason": seg.reason}
                 out.append(InertialThrow(sub, str(src.file), status, reason, info,
                                          None if tb is None else float(tb.mag_gyro.period),
-                                         None if tb is None else float(tb.mag_gyro.sd), list(rec.repairs)))
+                                         None if tb is None else float(tb.mag_gyro.sd), list(rec.repairs),
+                                         magnetometer=src.magnetometer))
     names = [t.name for t in out]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
@@ -104,8 +107,64 @@ def load_run_throws(cfg) -> list[InertialThrow]:
 
 
 def inertial_model(throw: InertialThrow, g: float) -> InertialMeasurements:
-    """The observation model of a throw (nominal period: the magnetometer/gyro estimate, else 10 ms)."""
-    return InertialMeasurements(throw.log, g, period=throw.period_mag_gyro or NOMINAL_PERIOD)
+    """The observation model of a throw (nominal period: the magnetometer/gyro estimate, else 10 ms); its
+    magnetometer is used when the log carries one and the source does not switch it off."""
+    return InertialMeasurements(throw.log, g, period=throw.period_mag_gyro or NOMINAL_PERIOD,
+                                magnetometer=throw.magnetometer and throw.log.mag is not None)
+
+
+def magnetometer_shared_start(models) -> dict:
+    """Starting values {name: value} of the field and hard iron from the throws' magnetometers: the hard
+    iron's x, y at the mean centre of the circles the field draws in the sensor's x–y plane, H at their
+    median radius, Z at its prior centre and the hard iron's z at the mean axial reading minus Z (Z and
+    h_z are told apart only by the disc's tilts, which the fit resolves).
+
+    Parameters
+    ----------
+    models : iterable of InertialMeasurements
+        The run's inertial models (those without the magnetometer are skipped).
+
+    Returns
+    -------
+    dict
+        Empty when no model uses its magnetometer.
+    """
+    from ...observation.imu.timebase import fit_circle
+    from ...observation.models.magnetometer import MAG_SHARED_PARAMETERS
+    centres, radii, axial = [], [], []
+    for m in models:
+        if isinstance(m, InertialMeasurements) and m.magnetometer:
+            c, r = fit_circle(m.log.mag[:, :2])
+            centres.append(c)
+            radii.append(r)
+            axial.append(float(np.mean(m.log.mag[:, 2])))
+    if not centres:
+        return {}
+    down = MAG_SHARED_PARAMETERS[1].off_value
+    cx, cy = np.mean(centres, axis=0)
+    return {"mag_field_horizontal": float(np.median(radii)), "mag_field_down": down, "mag_hard_iron_x": float(cx),
+            "mag_hard_iron_y": float(cy), "mag_hard_iron_z": float(np.mean(axial)) - down}
+
+
+def heading_start(problem, k: int, n: int = 72) -> float:
+    """The field heading ψ [rad] of inertial flight k that best fits its magnetometer along the flight
+    simulated from the problem's start vector (a grid of ``n`` headings over a turn); NaN without one."""
+    from dataclasses import replace
+    theta = problem.start_vector()[None]
+    for j, c in enumerate(problem.channels[k]):
+        if not (isinstance(c, InertialMeasurements) and c.magnetometer):
+            continue
+        tr = problem._run(theta, k, want_states=True, times=c.times)
+        if not tr.ok[0]:
+            return float("nan")
+        cols = problem.channel_columns(k)[j]
+        extra = np.repeat(theta[:, cols], n, axis=0)
+        psi = 2 * np.pi * np.arange(n) / n
+        extra[:, -1] = psi                                   # mag_heading: the model's last own parameter
+        pred = c.predict(replace(tr, states=np.repeat(tr.states, n, axis=0)), extra)
+        cost = np.nanmean((pred[:, c._seen[:, 6]][..., 6:] - c.measured[c._seen[:, 6], 6:][None]) ** 2, axis=(1, 2))
+        return float(psi[int(np.nanargmin(cost))])
+    return float("nan")
 
 
 def level_start(throw: InertialThrow, speed: float = 12.0, alpha: float = 0.1, phase: float = 0.0) -> np.ndarray:
@@ -145,7 +204,7 @@ def search_starts(problem, k: int, speeds=(9.0, 13.0, 17.0), alphas=(0.0, 0.15, 
     cost = np.zeros(len(grid))
     for c, p in preds:
         if isinstance(c, InertialMeasurements):
-            r = (p - np.concatenate([c.log.gyro, c.log.acc], axis=1)[None]) / START_WEIGHTS
+            r = (p[..., :6] - c.measured[None, :, :6]) / START_WEIGHTS
             cost += np.nanmean(r ** 2, axis=(1, 2))
     cost[~ok | ~np.isfinite(cost)] = np.inf
     best = int(np.argmin(cost))

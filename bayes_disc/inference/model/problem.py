@@ -40,7 +40,31 @@ R_LEVEL = np.diag([1.0, -1.0, -1.0])
 #: that depend on height)
 INERTIAL_RELEASE_HEIGHT = 1.0
 
-__all__ = ["Problem", "IC_NAMES"]
+__all__ = ["Problem", "IC_NAMES", "shared_observation_parameters"]
+
+
+def shared_observation_parameters(channels) -> dict:
+    """{name: TermParameter} of the parameters the observation models share across flights, in first-seen
+    order: one θ entry per name, read by every model that declares it (e.g. the logger's mount by every
+    inertial throw, the field only by throws whose magnetometer is used).
+
+    Parameters
+    ----------
+    channels : iterable of iterables of ObservationModel
+        Per flight, its observation models.
+
+    Returns
+    -------
+    dict
+        Raises ValueError when two models declare one name differently (unit, prior).
+    """
+    out: dict = {}
+    for ch in channels:
+        for c in ch:
+            for q in c.shared_parameters:
+                if out.setdefault(q.name, q) != q:
+                    raise ValueError(f"shared parameter {q.name!r} is declared differently by two observation models")
+    return out
 
 
 @dataclass
@@ -108,13 +132,10 @@ class Problem:
         markers = [c for ch in self.channels for c in ch if isinstance(c, MarkerPositions)]
         self.marker_ids = tuple(markers[0].data.marker_ids) if markers else ()
         expl = tuple(p for e in self.explanations for p in e.parameters_for(self.marker_ids))
-        shared: dict[str, tuple] = {}          # observation-model id -> its shared parameters (once per model)
-        for ch in self.channels:
-            for c in ch:
-                shared.setdefault(c.id, tuple(c.shared_parameters))
+        shared = shared_observation_parameters(self.channels)
         self.layout = ParameterLayout(
             terms=tuple(self.terms), explanation_parameters=expl,
-            observation_parameters=tuple(p for ps in shared.values() for p in ps),
+            observation_parameters=tuple(shared.values()),
             flight_names=tuple(f.name for f in self.flights),
             flight_parameters=tuple(tuple(p for c in ch for p in c.parameters) for ch in self.channels),
             flight_ic=tuple(FULL_IC if any(isinstance(c, MarkerPositions) for c in ch) else INERTIAL_IC
@@ -129,18 +150,16 @@ class Problem:
         if self.rates is None:
             self.rates = [self.flight_rate(s) for s in self.start_states]
         self.q_ref = [s[6:10] / np.linalg.norm(s[6:10]) for s in self.start_states]
-        # θ columns each channel reads besides the flight's ICs: its shared parameters, then its own
-        offsets, j = {}, L.observation_slice.start
-        for mid, ps in shared.items():
-            offsets[mid] = np.arange(j, j + len(ps))
-            j += len(ps)
+        # θ columns each channel reads besides the flight's ICs: its shared parameters (by name), then its own
+        at = {name: L.observation_slice.start + i for i, name in enumerate(shared)}
         expl_cols = np.arange(L.explanation_slice.start, L.explanation_slice.stop)
         self._columns = []
         for k, ch in enumerate(self.channels):
             per, o = [], L.own_slice(k).start
             for c in ch:
                 base = expl_cols if isinstance(c, MarkerPositions) else np.zeros(0, np.intp)
-                per.append(np.r_[base, offsets[c.id], np.arange(o, o + len(c.parameters))].astype(np.intp))
+                mine = np.array([at[q.name] for q in c.shared_parameters], np.intp)
+                per.append(np.r_[base, mine, np.arange(o, o + len(c.parameters))].astype(np.intp))
                 o += len(c.parameters)
             self._columns.append(per)
         # noise groups: every channel's, in flight order; _groups[k][c] = slice of channel c of flight k

@@ -33,7 +33,7 @@ from .draws import _walkers_as_chains, flight_entries, flight_variables, structu
 
 
 #: the inertial channels, in the order of the models' predictions
-IMU_CHANNELS = ("gx", "gy", "gz", "ax", "ay", "az")
+IMU_CHANNELS = ("gx", "gy", "gz", "ax", "ay", "az", "mx", "my", "mz")
 #: most (chain × draw) samples in the ``log_likelihood`` group (float32; ~4000 draws × ~1300 points: ~21 MB)
 N_LOG_LIKELIHOOD_DRAWS = 4000
 #: most (chain × draw) samples in the ``posterior_predictive`` group (float32; demo: ~16 MB)
@@ -57,6 +57,13 @@ def _marker_flights(problem: Problem) -> list[tuple[int, object]]:
 def _inertial_flights(problem: Problem) -> list[tuple[int, object]]:
     """(flight index, inertial model) of every flight with an inertial logger."""
     return [(k, c) for k, ch in enumerate(problem.channels) for c in ch if isinstance(c, InertialMeasurements)]
+
+
+def _pad_channels(x: np.ndarray, n: int) -> np.ndarray:
+    """x (..., c) with NaN channels appended up to n (a throw without the magnetometer among throws with it)."""
+    if x.shape[-1] >= n:
+        return x
+    return np.concatenate([x, np.full(x.shape[:-1] + (n - x.shape[-1],), np.nan)], axis=-1)
 
 
 def observation_points(problem: Problem) -> dict:
@@ -208,13 +215,14 @@ def build_inference_data(problem: Problem, chains: Chains, rng: np.random.Genera
         obs_dims[key] = [f"time_{f.name}", "marker", "axis"]
     if marker_flights:
         obs_coords.update(marker=[str(m) for m in problem.marker_ids], axis=["x", "y", "z"])
+    n_imu = max((len(c.series_names) for _, c in imu_flights), default=0)   # channels: NaN where a throw has fewer
     for k, c in imu_flights:
         key = f"imu_{c.flight}"
-        observed[key] = np.concatenate([c.log.gyro, c.log.acc], axis=1)
+        observed[key] = _pad_channels(c.measured, n_imu)
         obs_coords[f"row_{c.flight}"] = c.row_offsets.astype(int)
         obs_dims[key] = [f"row_{c.flight}", "imu_channel"]
     if imu_flights:
-        obs_coords["imu_channel"] = list(IMU_CHANNELS)
+        obs_coords["imu_channel"] = list(IMU_CHANNELS[:n_imu])
     # thinned draws: pointwise log-likelihood and posterior predictive from one simulation
     ll_steps = _thinned_steps(n_chain, n_steps, n_log_likelihood)
     pp_steps = ll_steps[_thinned_steps(n_chain, ll_steps.size, n_predictive)]
@@ -239,9 +247,9 @@ def build_inference_data(problem: Problem, chains: Chains, rng: np.random.Genera
     for (k, c), m in zip(imu_flights, imu_sims):
         m = m.reshape(n_chain, ll_steps.size, *m.shape[1:])[:, keep]
         g = problem.channel_groups(k)[problem.channels[k].index(c)]
-        per_channel = np.array([1, 1, 0, 3, 3, 2])                           # noise group of gx … az
+        per_channel = np.array(c.series_groups)                             # noise group of gx … (mz)
         s = sg_pp[..., g][..., per_channel][:, :, None, :]
-        predictive[f"imu_{c.flight}"] = (m + s * rng.standard_normal(m.shape)).astype(np.float32)
+        predictive[f"imu_{c.flight}"] = _pad_channels(m + s * rng.standard_normal(m.shape), n_imu).astype(np.float32)
     ll_vars, ll_coords = {}, {"chain": np.arange(n_chain), "draw": ll_steps}
     if marker_flights:
         ll_vars["markers"] = (("chain", "draw", "point"), log_lik.reshape(n_chain, ll_steps.size, -1).astype(np.float32))

@@ -1,4 +1,5 @@
-"""Inertial (IMU) recordings of one throw: gyroscope and low-pass-filtered accelerometer.
+"""Inertial (IMU) recordings of one throw: gyroscope, low-pass-filtered accelerometer and, optionally,
+magnetometer.
 
 A logger fixed in the disc measures, in its sensor axes s (tilted from the body axes B by the small
 rotation C = exp(−[ε]×), ε = (ε1, ε2, 0) [rad]; sensor +z along b3):
@@ -30,6 +31,15 @@ imu_offset_z`` (r_s, m), ``imu_lpf_tau`` (s), ``imu_tilt_1, imu_tilt_2`` (ε, ra
 ``imu_period`` (s, logs without time column), ``gyro_bias_x…z`` (rad/s), ``acc_bias_x…z`` (m/s²),
 ``lpf_state_x…z`` (y_0, m/s²).
 
+Magnetometer (``magnetometer=True``; :mod:`.magnetometer` for its equations, parameters and what it
+does not model): three more channels m_s(t_i) = C ⟨Rᵀ⟩_i B_w + h on the same samples t_i. They are
+channels of this unit rather than a unit of their own so that the throw's clock is one parameter in one
+place: the row period P that places the gyro and accelerometer rows in time places the magnetometer's
+rows too, and the field's turning against the simulated attitude fixes P independently of the spin-down
+and wobble. The magnetometer adds its shared parameters (field strength, hard iron) after the mount's,
+the per-throw field heading after the filter state, and two noise groups (``mag_axial``,
+``mag_transverse``, µT) after the four above; without it the unit is exactly the gyro/accelerometer one.
+
 Residual series (diagnostics): measured − predicted gyro and accelerometer along the sensor axes
 (``gyro_x…z`` [rad/s], ``acc_x…z`` [m/s²]), each scaled by its noise group's σ (unit standard error 1),
 at the samples t_i of the parameter vector; the covariates (α, air speed, spin, height) are interpolated
@@ -47,6 +57,8 @@ from ...physics import TermParameter
 from ...physics.frames import quat_from_rotvec, quat_to_matrix
 from ..imu.formats import InertialLog
 from .base import ObservationModel, ResidualSeries
+from .magnetometer import (MAG_GROUPS, MAG_NOMINAL_NOISE, MAG_OWN_PARAMETERS, MAG_SERIES, MAG_SHARED_PARAMETERS,
+                           MAG_WINDOW, body_field, field_world, window_mean)
 
 #: fine simulation points per nominal row period
 OVERSAMPLE = 4
@@ -66,6 +78,8 @@ GROUPS = ("gyro_axial", "gyro_transverse", "acc_axial", "acc_transverse")
 SERIES = ("gyro_x", "gyro_y", "gyro_z", "acc_x", "acc_y", "acc_z")
 SERIES_GROUPS = (1, 1, 0, 3, 3, 2)
 SERIES_UNITS = ("rad/s",) * 3 + ("m/s²",) * 3
+#: noise groups of the magnetometer's series (mag_x, mag_y, mag_z) when it is used
+MAG_SERIES_GROUPS = (5, 5, 4)
 
 
 @nb.njit(cache=True)
@@ -217,30 +231,35 @@ def sensor_signals(states, h, g, r_s, C):
 
 @dataclass(eq=False)
 class InertialMeasurements(ObservationModel):
-    """Gyroscope and filtered accelerometer of one throw (module docstring).
+    """Gyroscope, filtered accelerometer and (optionally) magnetometer of one throw (module docstring).
 
     Parameters
     ----------
     log : InertialLog
-        The throw's free flight (first row = release), gyro rad/s, acc m/s², sensor axes.
+        The throw's free flight (first row = release), gyro rad/s, acc m/s², mag µT, sensor axes.
     g : float
         Gravitational acceleration [m/s²].
     period : float
         Nominal row period [s] (sets the simulation grid; the row period itself is a parameter for logs
         without time column).
+    magnetometer : bool
+        Also predict the log's magnetometer (``log.mag`` required) on the same clock.
     """
 
     id = "imu"
-    title = "Inertial logger: gyroscope and low-pass-filtered accelerometer"
+    title = "Inertial logger: gyroscope, low-pass-filtered accelerometer and magnetometer"
     equations = ("ω_s = C ω_B + b_g;  τ dy/dt = C[Rᵀ(dv/dt + g ẑ) + ω̇_B × r_s + ω_B × (ω_B × r_s)] − y, "
-                 "a_s = y + b_a;  t_i = (row_i − row_0) P")
+                 "a_s = y + b_a;  m_s = C ⟨Rᵀ⟩ B_w + h (window 2 T_m);  t_i = (row_i − row_0) P")
 
     log: InertialLog
     g: float
     period: float
+    magnetometer: bool = False
     _obs: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
+        if self.magnetometer and self.log.mag is None:
+            raise ValueError(f"{self.log.name}: the magnetometer is asked for but the log has none")
         self.flight = self.log.name
         self.timed = self.log.times is not None
         rows = np.asarray(self.log.rows, float)
@@ -253,16 +272,36 @@ class InertialMeasurements(ObservationModel):
             span = self.row_offsets[-1] * self.period * PERIOD_SPAN
         n_grid = max(int(np.ceil(span / self.h)) + 3, 6)
         self.times = np.arange(n_grid) * self.h                   # simulation grid [s] from release
-        data = np.concatenate([self.log.gyro, self.log.acc], axis=1)          # (n, 6)
+        data = self.measured
         self._seen = np.isfinite(data)
+        if self.magnetometer:     # rows whose nominal window reaches before release: the hand's spin-up
+            nominal = self.sample_times if self.timed else self.row_offsets * self.period
+            self._seen[nominal < MAG_WINDOW, 6:] = False
         self._obs = data[self._seen]
-        channel = np.broadcast_to(np.arange(6), data.shape)[self._seen]
-        self._groups = np.array(SERIES_GROUPS)[channel].astype(np.intp)
+        channel = np.broadcast_to(np.arange(data.shape[1]), data.shape)[self._seen]
+        self._groups = np.array(self.series_groups)[channel].astype(np.intp)
+
+    # -- channels ------------------------------------------------------------------------------------
+    @property
+    def measured(self) -> np.ndarray:
+        """(n, 6) gyro [rad/s] and accelerometer [m/s²], or (n, 9) with the magnetometer [µT] appended."""
+        parts = [self.log.gyro, self.log.acc] + ([self.log.mag] if self.magnetometer else [])
+        return np.concatenate(parts, axis=1)
+
+    @property
+    def series_names(self) -> tuple[str, ...]:
+        """Names of the predicted channels, in the order of :meth:`predict`'s last axis."""
+        return SERIES + (MAG_SERIES if self.magnetometer else ())
+
+    @property
+    def series_groups(self) -> tuple[int, ...]:
+        """Noise group of each channel of :attr:`series_names`."""
+        return SERIES_GROUPS + (MAG_SERIES_GROUPS if self.magnetometer else ())
 
     # -- contract ------------------------------------------------------------------------------------
     @property
     def shared_parameters(self) -> tuple[TermParameter, ...]:
-        return SHARED_PARAMETERS
+        return SHARED_PARAMETERS + (MAG_SHARED_PARAMETERS if self.magnetometer else ())
 
     @property
     def parameters(self) -> tuple[TermParameter, ...]:
@@ -273,11 +312,11 @@ class InertialMeasurements(ObservationModel):
                 for a in "xyz"]
         own += [TermParameter(f"lpf_state_{a}", "m/s²", f"accelerometer filter state at release along {a}",
                               0.0, 50.0) for a in "xyz"]
-        return tuple(own)
+        return tuple(own) + (MAG_OWN_PARAMETERS if self.magnetometer else ())
 
     @property
     def noise_names(self) -> tuple[str, ...]:
-        return tuple(f"sigma_{g}_{self.flight}" for g in GROUPS)
+        return tuple(f"sigma_{g}_{self.flight}" for g in GROUPS + (MAG_GROUPS if self.magnetometer else ()))
 
     @property
     def group_index(self) -> np.ndarray:
@@ -285,11 +324,12 @@ class InertialMeasurements(ObservationModel):
 
     @property
     def noise_units(self) -> tuple[str, ...]:
-        return ("rad/s", "rad/s", "m/s²", "m/s²")
+        return ("rad/s", "rad/s", "m/s²", "m/s²") + (("µT", "µT") if self.magnetometer else ())
 
     @property
     def nominal_noise(self) -> np.ndarray:
-        return np.array([0.02, 0.2, 0.3, 0.3])   # rad/s (axial, transverse), m/s² (axial, transverse)
+        # rad/s (axial, transverse), m/s² (axial, transverse), µT (axial, transverse)
+        return np.array([0.02, 0.2, 0.3, 0.3] + (list(MAG_NOMINAL_NOISE) if self.magnetometer else []))
 
     def sample_times_for(self, period: np.ndarray) -> np.ndarray:
         """(B, n) sample times [s] since release for row periods (B,) (ignored for timed logs)."""
@@ -298,26 +338,40 @@ class InertialMeasurements(ObservationModel):
         return period[:, None] * self.row_offsets[None, :]
 
     def split(self, extra: np.ndarray) -> dict:
-        """Named parameter arrays (B, …) from the model's extra values (shared, then own)."""
-        s = extra[:, :6]
-        own = extra[:, 6:]
+        """Named parameter arrays (B, …) from the model's extra values (shared, then own); with the
+        magnetometer also ``field`` (B, 3) [µT] in world axes and ``hard_iron`` (B, 3) [µT]."""
+        ns = len(self.shared_parameters)
+        s = extra[:, :ns]
+        own = extra[:, ns:]
         j = 0 if self.timed else 1
-        return {"r_s": s[:, 0:3], "tau": s[:, 3], "tilt": s[:, 4:6],
-                "period": own[:, 0] if not self.timed else np.full(extra.shape[0], np.nan),
-                "b_g": own[:, j:j + 3], "b_a": own[:, j + 3:j + 6], "y0": own[:, j + 6:j + 9]}
+        out = {"r_s": s[:, 0:3], "tau": s[:, 3], "tilt": s[:, 4:6],
+               "period": own[:, 0] if not self.timed else np.full(extra.shape[0], np.nan),
+               "b_g": own[:, j:j + 3], "b_a": own[:, j + 3:j + 6], "y0": own[:, j + 6:j + 9]}
+        if self.magnetometer:
+            out["field"] = field_world(s[:, 6], s[:, 7], own[:, j + 9])
+            out["hard_iron"] = s[:, 8:11]
+        return out
 
     def predict(self, trajectories, extra: np.ndarray | None) -> np.ndarray:
-        """(B, n, 6) predicted gyro [rad/s] and accelerometer [m/s²] at the log's samples; NaN for a
-        parameter vector whose samples fall beyond the simulated grid or whose τ is not positive."""
+        """(B, n, 6) predicted gyro [rad/s] and accelerometer [m/s²] at the log's samples, (B, n, 9) with
+        the magnetometer [µT]; NaN for a parameter vector whose samples fall beyond the simulated grid or
+        whose τ is not positive."""
         p = self.split(extra)
-        x = sensor_signals(np.ascontiguousarray(trajectories.states), self.h, self.g,
-                           np.ascontiguousarray(p["r_s"]), np.ascontiguousarray(sensor_rotation(p["tilt"])))
+        states = np.ascontiguousarray(trajectories.states)
+        C = sensor_rotation(p["tilt"])
+        x = sensor_signals(states, self.h, self.g, np.ascontiguousarray(p["r_s"]), np.ascontiguousarray(C))
         tau = np.where(p["tau"] > 0, p["tau"], np.nan)
         x[..., 3:] = low_pass(np.ascontiguousarray(x[..., 3:]), np.ascontiguousarray(p["y0"]),
                               np.nan_to_num(tau, nan=1.0), self.h)
-        out = interpolate(x, self.h, np.ascontiguousarray(self.sample_times_for(p["period"])))
+        t = np.ascontiguousarray(self.sample_times_for(p["period"]))
+        out = interpolate(x, self.h, t)
         out[..., :3] += p["b_g"][:, None, :]
         out[..., 3:] += p["b_a"][:, None, :]
+        if self.magnetometer:
+            mean = window_mean(body_field(states, p["field"]), self.h, t, interpolate)    # ⟨Rᵀ⟩ B_w
+            mag = np.einsum("bij,bnj->bni", C, mean) + p["hard_iron"][:, None, :]
+            mag[np.isnan(out[..., 0])] = np.nan                 # samples beyond the grid
+            out = np.concatenate([out, mag], axis=2)
         out[~np.isfinite(tau)] = np.nan
         return out
 
@@ -325,18 +379,23 @@ class InertialMeasurements(ObservationModel):
         return prediction[:, self._seen] - self._obs[None]
 
     def residual_series(self, trajectories, extra, prediction, conditions, reference=None) -> ResidualSeries:
-        """Gyro and accelerometer residuals along the sensor axes at the samples (module docstring);
-        contract: :meth:`.base.ObservationModel.residual_series`."""
+        """Gyro, accelerometer (and magnetometer) residuals along the sensor axes at the samples (module
+        docstring); contract: :meth:`.base.ObservationModel.residual_series`."""
         p = self.split(extra)
         t = self.sample_times_for(p["period"])[0]
-        ref = np.concatenate([self.log.gyro, self.log.acc], axis=1) if reference is None else reference[0]
+        ref = self.measured if reference is None else reference[0]
         diff = ref - prediction[0]
+        if reference is None:
+            diff = np.where(self._seen, diff, np.nan)
         st = trajectories.states[0]
         grid = np.asarray(self.times, float)
         cov = {"alpha": np.interp(t, grid, conditions.alpha[0]), "speed": np.interp(t, grid, conditions.speed[0]),
                "spin": np.interp(t, grid, st[:, 12]), "height": np.interp(t, grid, st[:, 2]), "time": t.copy()}
-        return ResidualSeries(times=t.copy(), series={n: diff[:, j] for j, n in enumerate(SERIES)},
-                              unit_se={n: np.ones(t.size) for n in SERIES},
-                              groups=dict(zip(SERIES, SERIES_GROUPS)), units=dict(zip(SERIES, SERIES_UNITS)),
-                              covariates=cov, primary=SERIES,
-                              group_channels=(("gyro", "rad/s"), ("gyro", "rad/s"), ("acc", "m/s²"), ("acc", "m/s²")))
+        names = self.series_names
+        units = SERIES_UNITS + (("µT",) * 3 if self.magnetometer else ())
+        channels = (("gyro", "rad/s"), ("gyro", "rad/s"), ("acc", "m/s²"), ("acc", "m/s²"))
+        channels += (("mag", "µT"), ("mag", "µT")) if self.magnetometer else ()
+        return ResidualSeries(times=t.copy(), series={n: diff[:, j] for j, n in enumerate(names)},
+                              unit_se={n: np.ones(t.size) for n in names},
+                              groups=dict(zip(names, self.series_groups)), units=dict(zip(names, units)),
+                              covariates=cov, primary=names, group_channels=channels)
