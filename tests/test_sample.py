@@ -107,7 +107,7 @@ def four_flights_run(tmp_path_factory):
         assert main(["sample", str(cfg), "--no-progress"]) == 0
     finally:
         mp.undo()
-    assert (d / "reports/four.html").is_file()
+    assert (d / "out/reports/four.html").is_file()          # the report goes with its run
     return d
 
 
