@@ -61,8 +61,8 @@ def test_family_at_off_shape_is_the_original_formula(term_id):
 
 def test_original_formulas_hold_as_written():
     """Ground effect at ln_h = 0 decays over one diameter; the side force is linear in the advance ratio."""
-    from bayes_disc.physics.terms import CTX_AREA, CTX_DIAM, CTX_Q, CTX_R, CTX_SPEED, CTX_Z
-    ctx = np.zeros(26)
+    from bayes_disc.physics.terms import CTX_AREA, CTX_DIAM, CTX_Q, CTX_R, CTX_SIZE, CTX_SPEED, CTX_Z
+    ctx = np.zeros(CTX_SIZE)
     ctx[[CTX_Z, CTX_SPEED, CTX_Q, CTX_AREA, CTX_DIAM, CTX_R]] = [0.269, 10.0, 61.5, 0.057, 0.269, 40.0]
     ctx[16] = 1.0                                      # d3 = z
     ctx[7] = 10.0                                      # v_a along x

@@ -70,7 +70,8 @@ def test_registry_knows_every_unit_once_and_rejects_unknown_ids():
     kinds = {u.kind for u in UNITS.values()}
     assert kinds == {PHYSICS_TERM, DATA_EXPLANATION, OBSERVATION_MODEL, LEARNED}
     assert set(MODEL_EXTENSIONS) == {"side_force", "wind", "ground_effect", "nonlinear_aero", "spin_lift",
-                                     "roll_spin_coupling", "marker_geometry", "time_offset"}
+                                     "roll_spin_coupling", "inertia_ratio", "rate_coupling", "rate_damping",
+                                     "marker_geometry", "time_offset"}
     assert unit("markers").kind == OBSERVATION_MODEL
     with pytest.raises(KeyError, match="known: "):
         unit("magic")

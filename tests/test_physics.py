@@ -96,11 +96,12 @@ def test_mirrored_throw_gives_mirrored_path():
 #: (shape parameters of the families away from their off values too)
 TERM_VALUES = {"side_force": [0.3, 0.8], "wind": [1.5, -2.0, 0.3, 0.5, -0.4], "ground_effect": [0.4, 0.2, 0.3],
                "nonlinear_aero": [-1.5, 1.0, 0.3, 1.0, -2.0, 0.5], "spin_lift": [0.3, 1.2],
-               "roll_spin_coupling": [0.02, 0.9]}
+               "roll_spin_coupling": [0.02, 0.9], "inertia_ratio": [-0.05], "rate_coupling": [-0.006, 0.004],
+               "rate_damping": [-0.03, -0.002]}
 
 
 @pytest.mark.parametrize("terms", [(), ("side_force", "wind"), ("ground_effect",), ("nonlinear_aero",),
-                                   ("spin_lift", "roll_spin_coupling")])
+                                   ("spin_lift", "roll_spin_coupling"), ("inertia_ratio", "rate_coupling", "rate_damping")])
 def test_kernel_agrees_with_solve_ivp_dop853(terms):
     y0 = _state(pqr=(4.0, -3.0, 50.0))
     t = np.arange(0, 181) / 120.0 + 0.3

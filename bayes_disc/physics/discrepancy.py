@@ -140,9 +140,9 @@ def probe_context(z: float, alpha: float, mu: float, disc, rho: float = 1.23) ->
     flight along world x: D frame d1 = x, d3 = −z (the disc normal of docs/conventions.md, down for a disc flying
     upright), d2 = d3 × d1 = −y; v_a = V (cos α d1 + sin α d3), V = :data:`PROBE_SPEED`
     (α = atan2(v_a·d3, v_a·d1)); r = 2 μ V / d."""
-    from .terms import (CTX_AREA, CTX_DIAM, CTX_MASS, CTX_Q, CTX_R, CTX_RHO, CTX_SPEED, CTX_VAX, CTX_VAZ, CTX_ALPHA,
-                        CTX_D1X, CTX_D2Y, CTX_D3Z, CTX_Z)
-    ctx = np.zeros(26)
+    from .terms import (CTX_AREA, CTX_DIAM, CTX_IA, CTX_ID, CTX_MASS, CTX_Q, CTX_R, CTX_RHO, CTX_SPEED, CTX_VAX,
+                        CTX_VAZ, CTX_ALPHA, CTX_D1X, CTX_D2Y, CTX_D3Z, CTX_Z, CTX_SIZE)
+    ctx = np.zeros(CTX_SIZE)
     V = PROBE_SPEED
     ctx[CTX_Z], ctx[CTX_SPEED], ctx[CTX_ALPHA] = z, V, alpha
     ctx[CTX_Q] = 0.5 * rho * V * V
@@ -150,6 +150,7 @@ def probe_context(z: float, alpha: float, mu: float, disc, rho: float = 1.23) ->
     ctx[CTX_D1X], ctx[CTX_D2Y], ctx[CTX_D3Z] = 1.0, -1.0, -1.0
     ctx[CTX_R] = 2.0 * mu * V / disc.diameter
     ctx[CTX_AREA], ctx[CTX_DIAM], ctx[CTX_MASS], ctx[CTX_RHO] = disc.area, disc.diameter, disc.mass, rho
+    ctx[CTX_IA], ctx[CTX_ID] = disc.Ia, disc.Id
     return ctx
 
 

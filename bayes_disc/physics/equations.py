@@ -60,7 +60,7 @@ def aerodynamic_loads(y, coefficients: Coefficients, disc: Disc, env: Environmen
     F = lift * np.cross(D.d2, v_hat) - drag * v_hat
     M = roll * D.d1 + pitch * D.d2 + spin * D.d3
     ctx = (t, y[0], y[1], y[2], speed, alpha, Q, *v_air, *D.d1, *D.d2, *D.d3, p, q, r,
-           A, d, disc.mass, env.rho)
+           A, d, disc.mass, env.rho, disc.Ia, disc.Id)
     off = 0
     for term in terms:
         if term.loads is not None:

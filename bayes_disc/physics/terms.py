@@ -14,7 +14,8 @@ so the numpy reference equations call exactly the same code.
 
 Flight context ``ctx`` (a tuple; indices are the ``CTX_*`` constants): time t [s], centre-of-mass position
 x, y, z [m], air speed |v_a| [m/s], angle of attack α [rad], dynamic pressure Q = ρ|v_a|²/2 [Pa], v_a [m/s],
-d1, d2, d3 (world components), p, q, r [rad/s], A [m²], d [m], m [kg], ρ [kg/m³].
+d1, d2, d3 (world components), p, q, r [rad/s], A [m²], d [m], m [kg], ρ [kg/m³], Ia, Id [kg m²] (the
+configured disc's axial and diametral moments of inertia).
 """
 from __future__ import annotations
 
@@ -33,6 +34,9 @@ CTX_D2X, CTX_D2Y, CTX_D2Z = 13, 14, 15
 CTX_D3X, CTX_D3Y, CTX_D3Z = 16, 17, 18
 CTX_P, CTX_QRATE, CTX_R = 19, 20, 21
 CTX_AREA, CTX_DIAM, CTX_MASS, CTX_RHO = 22, 23, 24, 25
+CTX_IA, CTX_ID = 26, 27
+#: length of the flight context
+CTX_SIZE = 28
 
 
 @dataclass(frozen=True)
@@ -273,8 +277,143 @@ ROLL_SPIN_COUPLING = Term(
 )
 
 
+# --- the instrumented disc's inertia ratio ---------------------------------------------------------------
+
+@nb.njit(inline="always", cache=True)
+def _inertia_ratio_loads(E, off, b, ctx):
+    """ΔM = ε_I · Ia · r · (p d2 − q d1): the gyroscopic moment of an axial inertia Ia (1 + ε_I) (:data:`INERTIA_RATIO`)."""
+    s = E[off, b] * ctx[CTX_IA] * ctx[CTX_R]
+    p, q = ctx[CTX_P], ctx[CTX_QRATE]
+    return (0.0, 0.0, 0.0,
+            s * (p * ctx[CTX_D2X] - q * ctx[CTX_D1X]),
+            s * (p * ctx[CTX_D2Y] - q * ctx[CTX_D1Y]),
+            s * (p * ctx[CTX_D2Z] - q * ctx[CTX_D1Z]))
+
+
+INERTIA_RATIO = Term(
+    id="inertia_ratio",
+    title="The flying disc's own inertia ratio Ia/Id (a logger or a different disc changes it): the wobble's "
+    "turning rate in the body frame",
+    equations="Ia → Ia (1 + ε_I) at fixed Id, as the moment ΔM = ε_I · Ia · r · (p d2 − q d1)  "
+    "(body axes: ΔM_B = ε_I Ia ω_z (−ω_y, ω_x, 0)); the torque-free wobble turns in the body frame at "
+    "κ r, κ = (Ia/Id)(1 + ε_I) − 1",
+    parameters=(TermParameter("eps_I", "1", "relative change of the axial moment of inertia Ia at fixed Id, "
+                              "i.e. of the ratio Ia/Id", prior_sd=0.05),),
+    loads=_inertia_ratio_loads,
+    notes="""Euler's equations of the axisymmetric disc, I = diag(Id, Id, Ia), body axes b1 b2 b3:
+
+    Id dω_x/dt = M_x + (Id − Ia) ω_y ω_z
+    Id dω_y/dt = M_y − (Id − Ia) ω_z ω_x
+    Ia dω_z/dt = M_z
+
+Without moments the transverse rate W = ω_x + i ω_y obeys dW/dt = i (Ia/Id − 1) ω_z W: it turns in the
+body frame at κ ω_z, κ = (Ia − Id)/Id (0.926 for the default Ia = 0.00235, Id = 0.00122 kg m²).
+
+A disc whose axial inertia is Ia' = Ia (1 + ε_I) (same Id) has
+
+    Id dω_x/dt = M_x + (Id − Ia) ω_y ω_z − ε_I Ia ω_y ω_z
+    Id dω_y/dt = M_y − (Id − Ia) ω_z ω_x + ε_I Ia ω_z ω_x
+
+i.e. the configured disc's equations with the extra body moment
+
+    ΔM_B = ε_I Ia ω_z (−ω_y, ω_x, 0) = ε_I Ia ω_z (b3 × ω_B)
+
+which in the D frame (ω = p d1 + q d2 + r d3, r = ω_z, d3 = b3: d3 × d1 = d2, d3 × d2 = −d1) reads
+
+    ΔM = ε_I Ia r (p d2 − q d1)
+
+and the wobble turns at κ' = (Ia/Id)(1 + ε_I) − 1: Δκ = (Ia/Id) ε_I ≈ 1.93 ε_I. The spin equation
+Ia' dω_z/dt = M_z is the configured one with M_z/(1 + ε_I): the spin-down coefficient absorbs it exactly
+(fitted CNr = CNr' / (1 + ε_I)), so the term adds no axial moment. Only the ratio is identifiable: a common
+scale of Ia and Id rescales every moment coefficient (docs/inertial.md), which the fit absorbs.
+
+Prior: ε_I ~ N(0, 0.05²), i.e. κ ± 0.1. Upper bound: for any body Ia = ∫(x² + y²) dm and Id = ∫(y² + z²) dm =
+Ia/2 + ∫z² dm, so Ia/Id = 2/(1 + 2∫z² dm/Ia) ≤ 2 (a flat lamina), ε_I ≤ 2/1.926 − 1 = 0.04. Below: a logger
+mounted under the flight plate adds ∫z² dm (its height and its offset from the disc's centre of mass) and the
+published inertias of one disc model differ by a few per cent; 0.05 covers both, not the κ = 0.78–1.01 spread
+of the real throws by itself (1.01 needs Ia/Id > 2: no rigid disc).""",
+)
+
+
+# --- cross-coupled rate moments ------------------------------------------------------------------------
+
+@nb.njit(inline="always", cache=True)
+def _rate_coupling_loads(E, off, b, ctx):
+    """ΔR = C_Rq q Q A d about d1,  ΔM = C_Mp p Q A d about d2 (:data:`RATE_COUPLING`)."""
+    qad = ctx[CTX_Q] * ctx[CTX_AREA] * ctx[CTX_DIAM]
+    roll = E[off + 1, b] * ctx[CTX_QRATE] * qad
+    pitch = E[off, b] * ctx[CTX_P] * qad
+    return (0.0, 0.0, 0.0,
+            roll * ctx[CTX_D1X] + pitch * ctx[CTX_D2X],
+            roll * ctx[CTX_D1Y] + pitch * ctx[CTX_D2Y],
+            roll * ctx[CTX_D1Z] + pitch * ctx[CTX_D2Z])
+
+
+RATE_COUPLING = Term(
+    id="rate_coupling",
+    title="Cross-coupled rate moments: a pitching moment from the roll rate and a rolling moment from the pitch rate",
+    equations="M = (C_M0 + C_Mα α + C_Mq q + C_Mp p) Q A d  (about d2),  R = (C_Rr r + C_Rp p + C_Rq q) Q A d  "
+    "(about d1); p, q in rad/s as C_Mq, C_Rp",
+    parameters=(TermParameter("CMp", "s/rad", "pitching moment per unit roll rate p", prior_sd=0.01),
+                TermParameter("CRq", "s/rad", "rolling moment per unit pitch rate q", prior_sd=0.01)),
+    loads=_rate_coupling_loads,
+    notes="""The transverse rate moment of the model is a 2×2 matrix on ω⊥ = p d1 + q d2:
+
+    (R, M) = Q A d [[C_Rp, C_Rq], [C_Mp, C_Mq]] (p, q)
+
+Its diagonal (C_Rp, C_Mq) damps the wobble; the new off-diagonal terms split into an antisymmetric part
+c = (C_Mp − C_Rq)/2, the moment c Q A d (p d2 − q d1) = c Q A d (d3 × ω), and a symmetric part
+(C_Mp + C_Rq)/2 (an anisotropic damping with axes at 45° to the air velocity). The antisymmetric part has
+the form of the inertia term's moment ε_I Ia r (d3 × ω): it shifts the wobble's body-frame rate by
+
+    Δκ = c Q A d / (Id r)
+
+(about 22 c per s/rad at 13 m/s and r = 60 rad/s with the default disc), largest at high dynamic pressure
+and low spin, where an inertia change shifts κ by the same (Ia/Id) ε_I throughout the flight: the data
+tell them apart by how κ drifts as Q/r falls.
+
+Prior: N(0, 0.01²) s/rad each, the size of the direct rate damping (C_Mq = −0.0144, C_Rp = −0.0125 s/rad,
+Hummel 2003, flight f2302): a cross-coupling as large as the damping itself is one sd.""",
+)
+
+
+# --- wobble damping that depends on the angle of attack and the wobble amplitude ---------------------------
+
+@nb.njit(inline="always", cache=True)
+def _rate_damping_loads(E, off, b, ctx):
+    """ΔM = (C_wα α + C_ww |ω⊥|) (p d1 + q d2) Q A d,  |ω⊥| = √(p² + q²) (:data:`RATE_DAMPING`)."""
+    p, q = ctx[CTX_P], ctx[CTX_QRATE]
+    c = (E[off, b] * ctx[CTX_ALPHA] + E[off + 1, b] * math.sqrt(p * p + q * q)) * ctx[CTX_Q] * ctx[CTX_AREA] * ctx[CTX_DIAM]
+    return (0.0, 0.0, 0.0,
+            c * (p * ctx[CTX_D1X] + q * ctx[CTX_D2X]),
+            c * (p * ctx[CTX_D1Y] + q * ctx[CTX_D2Y]),
+            c * (p * ctx[CTX_D1Z] + q * ctx[CTX_D2Z]))
+
+
+RATE_DAMPING = Term(
+    id="rate_damping",
+    title="Wobble damping that changes with the angle of attack and with the wobble amplitude",
+    equations="R = (C_Rr r + C_Rp p + ΔC_w p) Q A d  (about d1),  M = (C_M0 + C_Mα α + C_Mq q + ΔC_w q) Q A d  "
+    "(about d2),  ΔC_w = C_wα α + C_ww |ω⊥|,  |ω⊥| = √(p² + q²)  (α in rad, p, q in rad/s)",
+    parameters=(TermParameter("Cw_alpha", "s/rad²", "change of the transverse rate damping per radian of α",
+                              prior_sd=0.03),
+                TermParameter("Cw_amp", "s²/rad²", "change of the transverse rate damping per rad/s of wobble "
+                              "amplitude √(p² + q²)", prior_sd=0.002)),
+    loads=_rate_damping_loads,
+    notes="""The base model damps the wobble ω⊥ = p d1 + q d2 with constant C_Rp (roll) and C_Mq (pitch); the
+amplitude then decays at a rate ∝ Q that no constant pair makes both fast early and nil (or negative) late.
+ΔC_w adds the same damping to both axes, growing linearly with α (the flow over the rim changes with the
+angle of attack) and with the wobble amplitude (a quadratic damping: large wobbles decay, small ones are
+left): with C_ww > 0 and a negative net linear damping the amplitude settles on a limit cycle.
+
+Priors: C_wα ~ N(0, 0.03²) s/rad², a change of the size of C_Mq, C_Rp (0.01 s/rad, Hummel 2003) over
+0.3 rad of α; C_ww ~ N(0, 0.002²) s²/rad², the same change over a 5 rad/s wobble.""",
+)
+
+
 TERMS: dict[str, Term] = {t.id: t for t in (SIDE_FORCE, WIND, GROUND_EFFECT, NONLINEAR_AERO, SPIN_LIFT,
-                                             ROLL_SPIN_COUPLING)}
+                                             ROLL_SPIN_COUPLING, INERTIA_RATIO, RATE_COUPLING,
+                                             RATE_DAMPING)}
 
 
 def select_terms(registry: dict, ids, what: str = "physics term") -> tuple[Term, ...]:
