@@ -114,7 +114,6 @@ def logger_readings(initial_state: np.ndarray, coefficients: Coefficients, n_row
     y0 = f_s[0] if spec.lpf_state is None else np.asarray(spec.lpf_state, float)
     acc = low_pass(f_s[None].copy(), y0[None].copy(), np.array([spec.lpf_tau]), h)[0]
     rows = np.arange(n_rows) * SUBSTEPS
-    R_rows = quat_to_matrix(states[rows, 6:10])
     gyro = states[rows, 10:13] @ C.T + np.asarray(spec.gyro_bias, float)
     b_body = np.einsum("njk,k->nj", np.transpose(quat_to_matrix(states[:, 6:10]), (0, 2, 1)),
                        np.asarray(spec.field_uT, float))
