@@ -4,7 +4,7 @@ concealed side force and with nothing missing."""
 import numpy as np
 import pytest
 
-from bayes_disc.diagnostics.diagnosis import rms_text
+from bayes_disc.diagnostics.diagnosis_words import rms_text
 from bayes_disc.diagnostics.missing_physics import (CANDIDATES, ModelFit, applicable_candidates, diagnose, model_fit,
                                                     structured)
 from bayes_disc.diagnostics.mismatch import onset_unavailable, term_signature

@@ -42,6 +42,9 @@ def load_run_flights(cfg: RunConfig):
 def build_problem(cfg: RunConfig, terms_override=None, flights=None, throws=None) -> Problem:
     """The Problem of a run.
 
+    Long: flights, throws, observation models, explanations and starts are assembled in the order the
+    parameter layout lays them out.
+
     Parameters
     ----------
     cfg : RunConfig

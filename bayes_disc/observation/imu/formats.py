@@ -220,6 +220,9 @@ def _number(text: str, path, line: int, column: str) -> float:
 def read_flatball_ins(path) -> InertialLog:
     """Read one flatball-ins logger CSV, repairing and reporting its known defects.
 
+    Long: one pass over the file's lines, whose repairs (header, stray spaces, short rows) are reported in
+    line order.
+
     Repairs (each reported in ``repairs`` with its line): a header cut by a glued data row (the
     glued row is dropped, the header continuation on the next line joined), stray spaces in column
     names, the ``gx, gy, gz`` gyro naming, rows with the wrong number of fields (dropped), rows
@@ -421,6 +424,8 @@ def repeated_sample_warnings(log: InertialLog) -> list[str]:
 
 def read_imu_csv(path) -> list[InertialLog]:
     """Read and validate an ``imu-csv`` file (docs/data-formats.md); one :class:`InertialLog` per flight.
+
+    Long: one validation pass over the rows, in the order their errors are reported.
 
     Header ``flight,t,gx,gy,gz,ax,ay,az`` required (extra columns allowed, kept in ``extra`` when
     numeric). Rejected with :class:`ImuFileError` naming file and line: a wrong field count, an empty
