@@ -140,18 +140,23 @@ def test_inertial_residual_series_white_at_the_truth_and_structured_without_the_
     assert set(skipped) == {"marker_geometry", "time_offset"} and "side_force" in keep
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("cy, expected", [(CY, "side_force"), (0.0, None)])
-def test_diagnose_inertial_throws(cy, expected):
-    """Least squares from data-derived starts, then every applicable candidate: a concealed side force is
-    named and the refit's residuals are white; with nothing missing the verdict is adequate."""
-    logs = throws(cy, seed=3)
+def diagnose_logs(logs):
+    """The diagnosis of these logs as ``diagnose`` makes it: least squares from data-derived starts (two
+    starts, 100 evaluations), then every applicable candidate in one process."""
     build = builder(logs)
     p = build(())
     ls = fit_least_squares(p, starts=2, max_nfev=100, seed=0)
     base = model_fit(p, ls, ())
     cands, _ = applicable_candidates(p, CANDIDATES)
-    d = diagnose(base, build, processes=1, max_nfev=100, candidates=cands)
+    return diagnose(base, build, processes=1, max_nfev=100, candidates=cands)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("cy, expected", [(CY, "side_force"), (0.0, None)])
+def test_diagnose_inertial_throws(cy, expected):
+    """Least squares from data-derived starts, then every applicable candidate: a concealed side force is
+    named and the refit's residuals are white; with nothing missing the verdict is adequate."""
+    d = diagnose_logs(throws(cy, seed=3))
     if expected is None:
         assert d.verdict == "adequate", [(c.id, c.delta_bic, c.status) for r in d.rounds for c in r]
     else:

@@ -179,16 +179,8 @@ def test_diagnose_finds_the_concealed_wobble_term(concealed):
     coupling or wobble damping is ranked first, accepted, its determined combinations are recovered to 25 %, and
     after the refit the transverse gyro residual RMS is within 20 % of the logger's noise (0.05 rad/s); throws
     with nothing concealed stay adequate (no wobble term accepted)."""
-    from bayes_disc.diagnostics.missing_physics import CANDIDATES, applicable_candidates, diagnose, model_fit
-    from bayes_disc.inference.fitting.leastsq import fit_least_squares
-    from test_inertial_diagnose import builder
-    logs = wobbling_throws(concealed, seed=11)
-    build = builder(logs)
-    p = build(())
-    ls = fit_least_squares(p, starts=2, max_nfev=100, seed=0)
-    base = model_fit(p, ls, ())
-    cands, _ = applicable_candidates(p, CANDIDATES)
-    d = diagnose(base, build, processes=1, max_nfev=100, candidates=cands)
+    from test_inertial_diagnose import diagnose_logs
+    d = diagnose_logs(wobbling_throws(concealed, seed=11))
     ranking = [(c.id, round(c.delta_bic, 1), c.status) for r in d.rounds for c in r]
     if concealed is None:
         assert d.verdict == "adequate", ranking
