@@ -71,7 +71,7 @@ def test_registry_knows_every_unit_once_and_rejects_unknown_ids():
     assert kinds == {PHYSICS_TERM, DATA_EXPLANATION, OBSERVATION_MODEL, LEARNED}
     assert set(MODEL_EXTENSIONS) == {"side_force", "wind", "ground_effect", "nonlinear_aero", "spin_lift",
                                      "roll_spin_coupling", "inertia_ratio", "rate_coupling", "rate_damping",
-                                     "marker_geometry", "time_offset"}
+                                     "disc_asymmetry", "marker_geometry", "time_offset"}
     assert unit("markers").kind == OBSERVATION_MODEL
     with pytest.raises(KeyError, match="known: "):
         unit("magic")

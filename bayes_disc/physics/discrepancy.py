@@ -141,7 +141,7 @@ def probe_context(z: float, alpha: float, mu: float, disc, rho: float = 1.23) ->
     upright), d2 = d3 × d1 = −y; v_a = V (cos α d1 + sin α d3), V = :data:`PROBE_SPEED`
     (α = atan2(v_a·d3, v_a·d1)); r = 2 μ V / d."""
     from .terms import (CTX_AREA, CTX_DIAM, CTX_IA, CTX_ID, CTX_MASS, CTX_Q, CTX_R, CTX_RHO, CTX_SPEED, CTX_VAX,
-                        CTX_VAZ, CTX_ALPHA, CTX_D1X, CTX_D2Y, CTX_D3Z, CTX_Z, CTX_SIZE)
+                        CTX_VAZ, CTX_ALPHA, CTX_D1X, CTX_D2Y, CTX_D3Z, CTX_Z, CTX_SIZE, CTX_D1BX)
     ctx = np.zeros(CTX_SIZE)
     V = PROBE_SPEED
     ctx[CTX_Z], ctx[CTX_SPEED], ctx[CTX_ALPHA] = z, V, alpha
@@ -151,6 +151,7 @@ def probe_context(z: float, alpha: float, mu: float, disc, rho: float = 1.23) ->
     ctx[CTX_R] = 2.0 * mu * V / disc.diameter
     ctx[CTX_AREA], ctx[CTX_DIAM], ctx[CTX_MASS], ctx[CTX_RHO] = disc.area, disc.diameter, disc.mass, rho
     ctx[CTX_IA], ctx[CTX_ID] = disc.Ia, disc.Id
+    ctx[CTX_D1BX] = 1.0                                   # the airflow along the body's b1 axis (β = 0)
     return ctx
 
 

@@ -59,8 +59,9 @@ def aerodynamic_loads(y, coefficients: Coefficients, disc: Disc, env: Environmen
     spin = c.CNr * r * Q * A * d                           # about d3
     F = lift * np.cross(D.d2, v_hat) - drag * v_hat
     M = roll * D.d1 + pitch * D.d2 + spin * D.d3
+    d1_body = R.T @ D.d1                                 # (cos β, sin β, 0): the airflow's azimuth in the disc
     ctx = (t, y[0], y[1], y[2], speed, alpha, Q, *v_air, *D.d1, *D.d2, *D.d3, p, q, r,
-           A, d, disc.mass, env.rho, disc.Ia, disc.Id)
+           A, d, disc.mass, env.rho, disc.Ia, disc.Id, d1_body[0], d1_body[1])
     off = 0
     for term in terms:
         if term.loads is not None:

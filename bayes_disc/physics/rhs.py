@@ -101,7 +101,7 @@ def rhs(t, y, cf, E, b, kd):
         D1x, D1y, D1z = r00 * d1x + r01 * d1y, r10 * d1x + r11 * d1y, r20 * d1x + r21 * d1y
         D2x, D2y, D2z = r01 * d1x - r00 * d1y, r11 * d1x - r10 * d1y, r21 * d1x - r20 * d1y
         ctx = (t, x, yy, z, sp, alpha, 0.5 * rho * sp2, ax, ay, az, D1x, D1y, D1z, D2x, D2y, D2z,
-               r02, r12, r22, p, q, oz, A, d, m, rho, 1.0 / inv_Ia, 1.0 / inv_Id)
+               r02, r12, r22, p, q, oz, A, d, m, rho, 1.0 / inv_Ia, 1.0 / inv_Id, d1x, d1y)
         e = extra_loads(E, b, ctx)
         dvx += e[0] * inv_m
         dvy += e[1] * inv_m

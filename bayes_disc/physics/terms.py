@@ -15,7 +15,8 @@ so the numpy reference equations call exactly the same code.
 Flight context ``ctx`` (a tuple; indices are the ``CTX_*`` constants): time t [s], centre-of-mass position
 x, y, z [m], air speed |v_a| [m/s], angle of attack α [rad], dynamic pressure Q = ρ|v_a|²/2 [Pa], v_a [m/s],
 d1, d2, d3 (world components), p, q, r [rad/s], A [m²], d [m], m [kg], ρ [kg/m³], Ia, Id [kg m²] (the
-configured disc's axial and diametral moments of inertia).
+configured disc's axial and diametral moments of inertia), and d1 in body axes (cos β, sin β): β is the
+azimuth of the airflow in the disc plane measured from the body's b1 axis (it turns at −r as the disc spins).
 """
 from __future__ import annotations
 
@@ -35,8 +36,9 @@ CTX_D3X, CTX_D3Y, CTX_D3Z = 16, 17, 18
 CTX_P, CTX_QRATE, CTX_R = 19, 20, 21
 CTX_AREA, CTX_DIAM, CTX_MASS, CTX_RHO = 22, 23, 24, 25
 CTX_IA, CTX_ID = 26, 27
+CTX_D1BX, CTX_D1BY = 28, 29
 #: length of the flight context
-CTX_SIZE = 28
+CTX_SIZE = 30
 
 
 @dataclass(frozen=True)
@@ -411,9 +413,63 @@ Priors: C_wα ~ N(0, 0.03²) s/rad², a change of the size of C_Mq, C_Rp (0.01 s
 )
 
 
+# --- an aerodynamic asymmetry fixed in the disc: a moment at twice the spin --------------------------------
+
+@nb.njit(inline="always", cache=True)
+def _disc_asymmetry_loads(E, off, b, ctx):
+    """R + i M = (C_Ac + i C_As) e^{−2iβ} Q A d about d1, d2 (:data:`DISC_ASYMMETRY`)."""
+    c, s = ctx[CTX_D1BX], ctx[CTX_D1BY]                  # cos β, sin β
+    cos2, sin2 = c * c - s * s, 2.0 * c * s
+    qad = ctx[CTX_Q] * ctx[CTX_AREA] * ctx[CTX_DIAM]
+    roll = (E[off, b] * cos2 + E[off + 1, b] * sin2) * qad
+    pitch = (E[off + 1, b] * cos2 - E[off, b] * sin2) * qad
+    return (0.0, 0.0, 0.0,
+            roll * ctx[CTX_D1X] + pitch * ctx[CTX_D2X],
+            roll * ctx[CTX_D1Y] + pitch * ctx[CTX_D2Y],
+            roll * ctx[CTX_D1Z] + pitch * ctx[CTX_D2Z])
+
+
+DISC_ASYMMETRY = Term(
+    id="disc_asymmetry",
+    title="An aerodynamic asymmetry fixed in the disc (a logger, a bump, a warp): a moment that turns with the "
+    "disc and so forces the wobble at twice the spin",
+    equations="R + i M = (C_Ac + i C_As) e^{−2iβ} Q A d  (R about d1, M about d2; β: the airflow's azimuth in "
+    "the disc plane from the body's b1 axis); in body axes M_x + i M_y = (C_Ac + i C_As) e^{−iβ} Q A d",
+    parameters=(TermParameter("CAc", "1", "moment of the asymmetry about the body's b1 axis when the airflow "
+                              "comes along b1 (β = 0), per Q A d", prior_sd=0.01),
+                TermParameter("CAs", "1", "the same about the body's b2 axis", prior_sd=0.01)),
+    loads=_disc_asymmetry_loads,
+    notes="""A disc that is not axisymmetric (an instrument mounted off the axis, a dent, a warped rim) sees the
+airflow from a direction that turns in its own frame: the airflow's azimuth β (from the body's b1 axis) falls
+at the spin rate, dβ/dt = −r. Any pitching or rolling moment the asymmetry adds is a function of β. Written
+in body axes as a Fourier series in β, m_B = M_x + i M_y = Σ_n c_n e^{inβ} Q A d:
+
+* n = +1, m_B ∝ e^{iβ}: a moment fixed relative to the airflow — the D frame's own constants C_M0 and a
+  roll trim, already in the model;
+* n = 0: a moment fixed in the disc — it tilts the spin axis like the sensor tilt and the constant part of
+  the wobble;
+* n = −1, m_B = (C_Ac + i C_As) e^{−iβ} Q A d: a moment that turns in the body frame at +r, in the same sense
+  as the free wobble, which turns at κ r with κ = Ia/Id − 1 ≈ 0.93. This is the term: it drives a wobble at
+  κ = 1 (twice the spin in space), close to resonance with the free one, and its response grows as the
+  forcing and free rates approach each other;
+* higher n turn at −n r in the body, far from the wobble's rate: their response is small.
+
+In the D frame (d1 = e^{iβ} in body axes, d2 = i d1): R + i M = m_B e^{−iβ} = (C_Ac + i C_As) e^{−2iβ} Q A d,
+i.e. R = (C_Ac cos 2β + C_As sin 2β) Q A d and M = (C_As cos 2β − C_Ac sin 2β) Q A d. The asymmetry belongs
+to the disc, so (C_Ac, C_As) are shared by every flight of one disc: the phase is measured from the body's b1
+axis, which for an inertial logger is the sensor's x axis.
+
+The forced response: with W = ω_x + i ω_y and the free wobble turning at κ r, dW/dt = i κ r W + m_B/Id
+gives, forced at e^{i r t}, |W| = |C_A| Q A d / (Id (1 − κ) r): at 10 m/s, r = 55 rad/s and κ = 0.93, a
+coefficient |C_A| = 0.005 drives |W| ≈ 1 rad/s.
+
+Prior: N(0, 0.01²) each, a moment of the size of the rate damping's at 1 rad/s of wobble (C_Mq ≈ −0.014 s/rad).""",
+)
+
+
 TERMS: dict[str, Term] = {t.id: t for t in (SIDE_FORCE, WIND, GROUND_EFFECT, NONLINEAR_AERO, SPIN_LIFT,
                                              ROLL_SPIN_COUPLING, INERTIA_RATIO, RATE_COUPLING,
-                                             RATE_DAMPING)}
+                                             RATE_DAMPING, DISC_ASYMMETRY)}
 
 
 def select_terms(registry: dict, ids, what: str = "physics term") -> tuple[Term, ...]:
