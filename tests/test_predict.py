@@ -57,3 +57,23 @@ def test_a_run_with_another_model_is_refused(data, capsys):
     assert main(["predict", str(cfg), "--from", str(_summary(d / "plain", truth))]) == 2
     err = capsys.readouterr().err
     assert "no parameter 'CY'" in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_held_out_fit_keeps_the_better_of_its_two_starts(data):
+    from bayes_disc.inference.fitting.leastsq import fit_least_squares
+    from bayes_disc.inference.model.config import load_config
+    from bayes_disc.inference.model.data import build_problem
+    from bayes_disc.jobs.predict import _fit_own, fit_held_out
+    d, _ = data
+    problem = build_problem(load_config(d / "config.yaml"))
+    free = fit_least_squares(problem, starts=1).theta
+    block = problem.layout.flight_slice(0)
+    poor = free.copy()
+    poor[block] = problem.start_vector()[block] * 0.5             # a start far from the flight's optimum
+    _, dev_poor = _fit_own(problem, poor, 0, max_nfev=3)
+    _, dev_free = _fit_own(problem, free, 0, max_nfev=3)
+    assert dev_free < dev_poor                                      # the two starts end apart in 3 evaluations
+    best = fit_held_out(problem, poor, free, 0, max_nfev=3)
+    _, ok = problem.residuals(best[None], 0)
+    assert ok[0]
+    assert best[block] == pytest.approx(_fit_own(problem, free, 0, max_nfev=3)[0][block])

@@ -8,10 +8,14 @@ Every flight of the configuration is fitted twice by least squares:
   flight's own initial conditions and nuisance parameters (row period, biases, filter state) free;
 * **free** — everything free (the flights of this configuration alone).
 
+The fixed fit starts both from the flight's own start and from its block of the free fit, and keeps the
+one with the lower profile deviance (the wobble's phase makes these fits multimodal); a flight that cannot
+be simulated with the fixed parameters from either start is reported ``failed`` with the reason.
+
 The ratio of the two RMS per channel says how well the run's physics predicts a throw it did not see
 (≈ 1: as well as a fit to the throw itself). Inertial throws flown upside down are reported as
 ``out_of_model`` and not fitted. Output ``prediction.json``:
-``{"flights": {flight: {"status", "reason", "channels": {channel: {"unit", "rms_fixed", "rms_free"}}}}}``,
+``{"flights": {flight: {"status" (ok | failed | out_of_model), "reason", "channels": {channel: {"unit", "rms_fixed", "rms_free"}}}}}``,
 channels ``markers`` [m], ``gyro`` [rad/s], ``acc`` [m/s²].
 """
 from __future__ import annotations
@@ -54,8 +58,10 @@ def channel_rms(problem, theta: np.ndarray, k: int) -> dict:
     return out
 
 
-def _fit_own(problem, theta: np.ndarray, k: int, max_nfev: int) -> np.ndarray:
-    """θ with flight k's own block refitted (shared entries held), weights refined twice from the RMS."""
+def _fit_own(problem, theta: np.ndarray, k: int, max_nfev: int) -> tuple[np.ndarray, float]:
+    """θ with flight k's own block refitted from θ's values (shared entries held), the weights refined twice
+    from the RMS; and the fit's profile deviance Σ_g n_g ln RMS_g² over flight k's noise groups g (+inf when
+    the flight cannot be simulated there), which compares fits with different noise scales."""
     cols = np.arange(problem.layout.flight_slice(k).start, problem.layout.flight_slice(k).stop)
     x = theta.copy()
     sigma = problem.nominal_noise.copy()
@@ -73,10 +79,24 @@ def _fit_own(problem, theta: np.ndarray, k: int, max_nfev: int) -> np.ndarray:
                             ftol=1e-10)
         x[cols] = res.x
         r, ok = problem.residuals(x[None], k)
-        if ok[0]:
-            for g in problem.flight_groups(k):
-                sigma[g] = max(float(np.sqrt(np.mean(r[0, groups == g] ** 2))), 5e-3 * problem.nominal_noise[g])
-    return x
+        if not (ok[0] and np.all(np.isfinite(r[0]))):
+            return x, float("inf")
+        for g in problem.flight_groups(k):
+            sigma[g] = max(float(np.sqrt(np.mean(r[0, groups == g] ** 2))), 5e-3 * problem.nominal_noise[g])
+    deviance = sum(np.sum(groups == g) * np.log(np.mean(r[0, groups == g] ** 2)) for g in problem.flight_groups(k))
+    return x, float(deviance)
+
+
+def fit_held_out(problem, theta: np.ndarray, free_theta: np.ndarray, k: int, max_nfev: int):
+    """Flight k's own block fitted with the shared entries of θ held, from two starts: the problem's own start
+    for the flight and the flight's block of the free fit (the wobble phase makes the fit multimodal). Returns
+    the better fit's θ (dim,), or None when neither can be simulated."""
+    block = problem.layout.flight_slice(k)
+    from_free = theta.copy()
+    from_free[block] = free_theta[block]
+    fits = [_fit_own(problem, start, k, max_nfev) for start in (theta, from_free)]
+    x, deviance = min(fits, key=lambda f: f[1])
+    return x if np.isfinite(deviance) else None
 
 
 def run_predict(cfg: RunConfig, run_dir, output=None) -> dict:
@@ -122,7 +142,13 @@ def run_predict(cfg: RunConfig, run_dir, output=None) -> dict:
                              seed=cfg.sampler.seed)
     flights = {}
     for k, f in enumerate(problem.flights):
-        fixed = _fit_own(problem, theta, k, cfg.least_squares.max_nfev)
+        fixed = fit_held_out(problem, theta, free.theta, k, cfg.least_squares.max_nfev)
+        if fixed is None:
+            flights[f.name] = {"status": "failed", "channels": {},
+                               "reason": "with the run's coefficients and shared parameters the throw could not "
+                                         "be simulated from either start (the problem's and the free fit's)"}
+            log.warning("%s: %s", f.name, flights[f.name]["reason"])
+            continue
         rf, rr = channel_rms(problem, fixed, k), channel_rms(problem, free.theta, k)
         flights[f.name] = {"status": "ok", "reason": "",
                            "channels": {c: {"unit": CHANNELS[c][0], "rms_fixed": rf[c], "rms_free": rr[c]}
