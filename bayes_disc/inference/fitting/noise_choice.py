@@ -9,7 +9,9 @@ build_problem`) and decides per flight:
    (:func:`.robust.suspected_gross_errors`: a gross error or a swap with probability ≥ 0.99). If it finds
    any, the flight gets ``robust`` noise: its gross errors are judged, removed and refitted before sampling
    (:func:`.robust.robust_refit`). Evidence does not rank ``robust`` against the others: it is fitted to
-   other data (the cleaned ones).
+   other data (the cleaned ones). When more than :data:`.robust.MANY_SUSPECTS` (2 %) of the flight's
+   points are judged gross errors, the noise more likely varies along the flight than that many slips
+   occurred: the flight is judged by evidence instead, and its record says why (``not_robust``).
 2. **Evidence.** Otherwise the least squares are refitted with each other candidate on every such flight at
    once: ``white`` (one σ per flight), ``per_point`` (white noise shaped by the file's ``sigma_m`` or
    covariance columns; only when the flight has them and ``per_point`` is not false), ``ar1`` (AR(1) in
@@ -21,8 +23,10 @@ build_problem`) and decides per flight:
 
        ΔBIC_f(c) = n_f ln(S̃_f,reference / S̃_f,c) − k_c ln n_f,
 
-   each S̃ at its candidate's joint least-squares optimum, k_c the candidate's own parameters per flight
-   (1 for AR(1)'s ρ_f, 0 otherwise). The candidate with the largest ΔBIC is chosen when it exceeds
+   S̃_f,c at candidate c's joint least-squares optimum (its ρ_f fitted first with the rest held, then
+   everything), S̃_f,reference the reference's lowest at any of the candidates' optima (so that a candidate
+   gains nothing from a start fit that stopped short of its optimum), k_c the candidate's own parameters per
+   flight (1 for AR(1)'s ρ_f, 0 otherwise). The candidate with the largest ΔBIC is chosen when it exceeds
    :data:`NOISE_EVIDENCE` = 10 (the threshold of ``diagnose``'s candidate terms); otherwise the reference
    stays.
 3. The run is refitted with every flight's choice (no refit when one candidate's fit already is it).
@@ -43,8 +47,9 @@ from ...observation.models import MarkerPositions
 from ...observation.models.noise import AR1Noise, RobustNoise, frame_index
 from ..model.config import AUTO, NoiseSettings, RunConfig
 from ..model.problem import Problem
-from .leastsq import LeastSquaresResult, refine_least_squares
-from .robust import suspected_gross_errors
+from .leastsq import REFINE_DECREMENT, LeastSquaresResult, refine_least_squares
+from .minimiser import minimise
+from .robust import MANY_SUSPECTS, suspected_gross_errors
 
 #: ΔBIC a candidate needs over the reference to be chosen
 NOISE_EVIDENCE = 10.0
@@ -130,11 +135,17 @@ class CandidateFit:
     def __post_init__(self):
         self.ss = self.problem.sum_squares(self.ls.theta[None])[0]
 
-    def flight_ss(self, k: int) -> tuple[float, int]:
-        """(S̃, n) of flight k's marker coordinates at this fit."""
+    def flight_ss(self, k: int, ss: np.ndarray | None = None) -> tuple[float, int]:
+        """(S̃, n) of flight k's marker coordinates at this fit (or in the sums of squares ``ss``)."""
         j = next(i for i, c in enumerate(self.problem.channels[k]) if isinstance(c, MarkerPositions))
         g = self.problem.channel_groups(k)[j].start
-        return float(self.ss[g]), int(self.problem.n_coords[g])
+        return float((self.ss if ss is None else ss)[g]), int(self.problem.n_coords[g])
+
+    def ss_at(self, other: "CandidateFit") -> np.ndarray:
+        """(n_groups,) this candidate's S̃ per noise group at ``other``'s optimum (the shared entries and
+        initial conditions; this fit's own noise parameters where ``other`` has none)."""
+        x = self.problem.layout.transfer(other.ls.theta, other.problem.layout, self.ls.theta)
+        return self.problem.sum_squares(x[None])[0]
 
     def rho(self, flight: str) -> float | None:
         name = f"rho_{flight}"
@@ -142,9 +153,15 @@ class CandidateFit:
 
 
 def _refit(problem: Problem, ls: LeastSquaresResult, noise: dict, max_nfev: int) -> tuple[Problem, LeastSquaresResult]:
-    """The problem with the marker noise ``noise`` ({flight: (model, per_point)}) refitted from ``ls``."""
+    """The problem with the marker noise ``noise`` ({flight: (model, per_point)}) refitted from ``ls``: the
+    new noise parameters (ρ_f) first, everything else held at ``ls`` (a smooth fit of a few parameters), then
+    everything. The first stage lets ρ_f reach its estimate even where the joint fit cannot move (a start
+    that stalled: its steps along a coefficient rejected)."""
     other = problem.with_marker_noise(noise)
     x0 = other.layout.transfer(ls.theta, problem.layout, other.start_vector())
+    new = np.isin(other.names, [n for n in other.names if n not in problem.names])
+    if new.any():          # the noise scales of the start: they only weigh the flights' separate fits of ρ_f
+        x0 = minimise(other, x0, ls.sigma, free=new, max_nfev=max_nfev, dtol=REFINE_DECREMENT).x
     return other, refine_least_squares(other, x0, max_nfev=max_nfev)
 
 
@@ -190,9 +207,11 @@ def evidence_record(k: int, name: str, labels: list, notes: dict, fits: dict) ->
     """One flight's evidence: ΔBIC of each candidate against the reference (its first label), ρ̂ of the AR(1)
     candidates, and the label chosen (:data:`NOISE_EVIDENCE`)."""
     reference = labels[0]
-    s_ref, n = fits[reference].flight_ss(k)
-    delta, rho = {}, {}
-    for lab in labels:
+    ref = fits[reference]
+    # the reference at its best point among the fits: a candidate gains nothing from a start that stalled
+    s_ref, n = min(ref.flight_ss(k, ref.ss_at(fits[lab])) for lab in labels)
+    delta, rho = {reference: 0.0}, {}
+    for lab in labels[1:]:
         s, _ = fits[lab].flight_ss(k)
         d = n * np.log(s_ref / s) - CANDIDATE_PARAMETERS[lab] * np.log(n)
         delta[lab] = float(d) if np.isfinite(d) else None
@@ -241,13 +260,15 @@ def choice_text(name: str, rec: dict) -> str:
         return (f"{name}: robust noise chosen: {rec['outliers']} point(s) judged gross errors and {rec['swaps']} "
                 "frame(s) label-swapped at the white fit")
     ref, delta = rec["reference"], rec["delta_bic"]
+    varies = f"; not robust: {rec['not_robust']}" if "not_robust" in rec else ""
     others = ", ".join(f"{lab} {_signed(d)}" for lab, d in delta.items() if lab not in (ref, label))
     if label == ref:
         return (f"{name}: {TITLES[ref]} kept (ΔBIC over it: {others or 'no other candidate'}; "
-                f"a candidate needs > {NOISE_EVIDENCE:.0f})")
+                f"a candidate needs > {NOISE_EVIDENCE:.0f}){varies}")
     rho = rec["rho"].get(label)
     return (f"{name}: {TITLES[label]} chosen (ΔBIC {_signed(delta[label])} over {ref}"
-            + (f", ρ̂ = {rho:.2f}" if rho is not None else "") + ")" + (f"; others: {others}" if others else ""))
+            + (f", ρ̂ = {rho:.2f}" if rho is not None else "") + ")" + (f"; others: {others}" if others else "")
+            + varies)
 
 
 def _signed(d) -> str:
@@ -269,7 +290,8 @@ class NoiseChoice:
         ``chosen`` ({model, per_point}: what the run uses), ``label``, ``by`` (``evidence``, ``gross errors``
         or ``configuration``), ``text``; for ``auto`` flights also ``outliers`` and ``swaps`` (judged at the
         white fit) and, when judged by evidence, ``reference``, ``delta_bic`` {label: ΔBIC}, ``rho``
-        {label: ρ̂}, ``threshold_delta_bic`` and ``not_tried`` {label: reason}.
+        {label: ρ̂}, ``threshold_delta_bic``, ``not_tried`` {label: reason} and, when too many points looked
+        like gross errors for ``robust``, ``not_robust`` (why).
     """
 
     problem: Problem
@@ -356,9 +378,12 @@ def choose_noise(problem: Problem, ls: LeastSquaresResult, settings: dict, max_n
     labels, notes = {}, {}
     for k in auto:
         name, s = problem.flights[k].name, settings.get(problem.flights[k].name, NoiseSettings())
-        found = suspects.get(name, {"outliers": 0, "swaps": 0})
+        found = suspects.get(name, {"outliers": 0, "swaps": 0, "points": 1})
         records[name].update(outliers=found["outliers"], swaps=found["swaps"])
-        if name in suspects:
+        if found["outliers"] > MANY_SUSPECTS * found["points"]:
+            records[name]["not_robust"] = (f"{found['outliers']} of {found['points']} points judged gross errors, more "
+                                           f"than {MANY_SUSPECTS:.0%}: the noise more likely varies along the flight")
+        if name in suspects and "not_robust" not in records[name]:
             records[name].update(label="robust", by="gross errors", chosen={"model": "robust", "per_point": s.per_point})
         else:
             labels[k], notes[k] = flight_candidates(marker_channel(problem, k), s)
