@@ -153,8 +153,9 @@ def words(result: dict) -> str:
         else:
             lines.append("No base coefficient moved by more than 2 sd.")
     if noise.get("ar1_explains") is False:
-        lines.append(f"Correlated (AR(1)) marker noise was tried (ΔBIC {noise['ar1_evidence']:.0f} over white noise) "
-                     "and leaves the structure below unexplained too, so it is not taken as the explanation.")
+        tried = (f"Correlated (AR(1)) marker noise was tried (ΔBIC {noise['ar1_evidence']:.0f} over white noise)"
+                 if noise.get("ar1_rho") else "The per-point noise chosen was tried")
+        lines.append(f"{tried} and leaves the structure below unexplained too, so it is not taken as the explanation.")
     lines += [] if noise.get("adopted") else choice_words(noise)
     for u in ([] if partial else result["unexplained"]):
         a, b = u["peak_window_s"]

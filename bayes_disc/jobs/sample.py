@@ -1,7 +1,8 @@
 """The sampling job of ``bayes-disc sample``: least squares, then emcee.
 
-Writes summary.json, posterior.nc, run_info.json and the least-squares result into the run's output folder
-(and ``flagged.json``, the points judged outliers and frames judged label-swapped, and
+Writes summary.json, posterior.nc, run_info.json, the least-squares result and ``noise_choice.json`` (each
+marker flight's noise model and why: :mod:`bayes_disc.inference.fitting.noise_choice`) into the run's output
+folder (and ``flagged.json``, the points judged outliers and frames judged label-swapped, and
 ``judgement_average.json``, the posterior averaged over that judgement, for ``robust`` marker noise:
 :mod:`bayes_disc.inference.fitting.robust`).
 :func:`sample` runs this job, then the run's HTML report (:func:`.outputs.build_run_report`).

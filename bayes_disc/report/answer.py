@@ -351,8 +351,8 @@ def qualified_by_adequacy(ident: Verdict, diagnosis: dict | None) -> Verdict:
     return Verdict(ident.topic, "attention", text, ident.command, ident.link)
 
 def answer_section(ctx) -> Section:
-    """The first screen: what was estimated, the three verdicts, each flight's marker noise, the coefficient
-    table."""
+    """The first screen: what was estimated, the three verdicts, the coefficient table, each flight's marker
+    noise (below the table, which stays on screen without scrolling)."""
     conv = convergence_verdict(ctx.summary["convergence"], ctx.summary.get("sampler_settings"))
     ident = identifiability_verdict(ctx.run.extras.get("identifiability"), ctx.coefficients, ctx.run.config_path)
     diag = ctx.run.extras.get("diagnosis")
@@ -365,5 +365,5 @@ def answer_section(ctx) -> Section:
                 "<i>out</i> is a finding, not an error. Rate coefficients (CMq, CRr, CRp, CNr) are per rad/s; "
                 "Potts &amp; Crowther give none. Details, 95 % intervals, R-hat and ESS per coefficient: "
                 '<a href="#coefficients">Coefficients</a>.</p>')
-    html = estimated_text(ctx) + verdicts + noise_choice_html(ctx.summary) + answer_table(ctx) + lit_note
+    html = estimated_text(ctx) + verdicts + answer_table(ctx) + lit_note + noise_choice_html(ctx.summary)
     return Section("answer", "Result", "", html)   # no reading guide: the first screen explains itself

@@ -1,7 +1,7 @@
 """Each marker flight's noise model chosen by evidence: ``noise: {model: auto}``, the default.
 
-One function, :func:`choose_noise`, makes the choice; ``sample`` and ``diagnose`` both call it at the same
-least-squares optimum, so they cannot disagree. It starts from the run fitted with white Gaussian noise on
+One function, :func:`choose_noise`, makes the choice; ``sample``, ``identifiability`` and ``diagnose`` call it
+at the same least-squares optimum, so they cannot disagree. It starts from the run fitted with white Gaussian noise on
 every ``auto`` flight (per-point errors as its ``per_point`` says: :func:`~bayes_disc.inference.model.data.
 build_problem`) and decides per flight:
 
