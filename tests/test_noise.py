@@ -326,7 +326,7 @@ def test_noise_configuration_keys_and_errors(folder):
     cfg = _config(folder, "c", "noise: {model: ar1}\nflight_options: {b: {noise: {per_point: false}}}")
     assert cfg.flight_noise("a")[0].model == "ar1" and cfg.flight_noise("b")[0].per_point == "false"
     assert cfg.flight_noise("b")[0].model == "ar1"
-    with pytest.raises(ConfigError, match=r"noise\.model.*one of \['gaussian', 'ar1', 'robust'\], got 'student'"):
+    with pytest.raises(ConfigError, match=r"noise\.model.*one of \['auto', 'gaussian', 'ar1', 'robust'\], got 'student'"):
         _config(folder, "c", "noise: {model: student}")
     with pytest.raises(ConfigError, match=r"noise\.per_point.*got 'maybe'"):
         _config(folder, "c", "noise: {per_point: maybe}")

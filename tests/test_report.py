@@ -223,6 +223,12 @@ def test_first_screen_leads_with_the_answer(tiny):
     assert "% of measured coordinates inside their 90 % interval" in lines[2]
     n_points = sum(f["points"] for f in summary["flights"].values())
     assert f"<b>{n_points} marker points</b>" in first and "<b>1 flight</b>" in first
+    # each flight's marker noise and why (noise: auto), below the coefficient table
+    from bayes_disc.report.answer import NOISE_WORDS
+    noise = first[first.index('<table class="noise-choice">'):]
+    assert first.index('<table class="num answer">') < first.index('<table class="noise-choice">')
+    for flight, r in summary["noise_choice"].items():
+        assert f"<tr><td>{flight}</td><td>{NOISE_WORDS[r['label']]}" in noise, (r, noise)
     table = first[first.index('<table class="num answer">'):]
     import re
     for name in summary["coefficients"]:

@@ -24,14 +24,17 @@ Writes into the run's output folder:
   ``{k}_times_{name}`` [s], and ``{k}_times`` (the flight's first observation model's times);
 * ``diagnosis_refit/``: the resampled run with the accepted terms (unless ``sample=False``).
 
-Correlated noise or missing physics? When the diagnosis with white marker noise leaves structure that no
-term explains in a flight with markers, the marker noise is made AR(1) (``noise.model: ar1``, ρ_f per
-flight) and the base model refitted (:func:`correlated_noise`). If AR(1) earns its place —
-ΔBIC = Σ_g n_g ln(S_g,white / S̃_g,AR(1)) − k ln N > ``EVIDENCE_THRESHOLD`` with k the number of ρ_f and S̃
-the effective sums of squares of the whitened residuals — the candidates are judged again under it (their
-evidence with AR(1) noise, whiteness of the AR(1) innovations), and ``diagnosis.json`` says so under
-``noise`` (``model``, ``rho`` per flight, ``evidence``): "noise correlated, ρ = 0.85; no missing physics"
-when nothing is left, or the terms found under correlated noise.
+Correlated noise or missing physics? The marker noise of every ``auto`` flight is chosen at the base
+model's least squares by :func:`bayes_disc.inference.fitting.noise_choice.choose_noise` — the call
+``sample`` makes, so the two never disagree — but the candidate terms are first judged with white noise on
+those flights: AR(1) noise with ρ → 1 would otherwise absorb the smooth misfit of missing physics. When that
+diagnosis accepts no term and leaves structure in a flight with markers, and the evidence chose AR(1) (or
+per-point) noise for some flight — ΔBIC_f = n_f ln(S̃_f,white / S̃_f,AR(1)) − ln n_f > 10 per flight, S̃ the
+effective sums of squares of the whitened residuals — the candidates are judged again under the chosen
+models (their evidence under them, whiteness of the AR(1) innovations), and ``diagnosis.json`` says so
+under ``noise`` (``model``, ``rho`` per flight, ``evidence``, and ``choice``, the per-flight records):
+"noise correlated, ρ = 0.85; no missing physics" when nothing is left, or the terms found under correlated
+noise (:func:`correlated_noise`).
 
 The ``diagnose`` job (:mod:`bayes_disc.jobs.diagnose`) runs :func:`analyse`, resamples with the accepted terms
 (:func:`refit_config`), writes :func:`diagnosis_record` and rebuilds the report; this module knows nothing of
@@ -49,7 +52,8 @@ import numpy as np
 from ..inference.model.config import RunConfig
 from ..inference.model.data import build_problem, load_run_flights
 from ..inference.model.inertial import load_run_throws
-from ..inference.fitting.leastsq import fit_least_squares, refine_least_squares
+from ..inference.fitting.leastsq import fit_least_squares
+from ..inference.fitting.noise_choice import NoiseChoice, choose_noise, run_settings
 from ..observation.registry import PHYSICS_TERM, unit
 from ..physics import COEFFICIENT_NAMES
 from ..physics.discrepancy import coefficient_curve
@@ -252,62 +256,63 @@ def save_series(path: Path, diag: Diagnosis) -> None:
     np.savez_compressed(path, **arrays)
 
 
-def correlated_noise(cfg: RunConfig, diag: Diagnosis, build_for, candidates, processes: int = 1) -> tuple:
-    """The diagnosis again with AR(1) marker noise, when that explains the data better (module docstring).
+def correlated_noise(cfg: RunConfig, diag: Diagnosis, build_for, candidates, choice: NoiseChoice,
+                     processes: int = 1) -> tuple:
+    """The diagnosis again under the marker noise models ``noise: auto`` chose, when they may explain the
+    structure the white diagnosis leaves (module docstring).
 
     Parameters
     ----------
     cfg : RunConfig
-        The run (its marker noise model is replaced by ``ar1``; flights with their own noise model keep it).
+        The run.
     diag : Diagnosis
-        The diagnosis with the run's own noise model.
+        The diagnosis with white noise on the ``auto`` flights.
     build_for : callable
         ``build_for(cfg)`` → ``build(ids)``: the problem of the run configuration ``cfg`` with the extra
         term ids.
     candidates : list of str
         The candidate ids judged.
+    choice : NoiseChoice
+        The choice at the base model's least squares (:func:`~bayes_disc.inference.fitting.noise_choice.
+        choose_noise`, the same call ``sample`` makes).
     processes : int
         Parallel candidate fits.
 
     Returns
     -------
-    (Diagnosis, dict, RunConfig) or None
-        The diagnosis under AR(1) noise, the ``noise`` record ({model, rho: {flight: ρ}, evidence}) and the
-        configuration it used; None when not tried (no marker flight with unexplained structure, or the
-        run's marker noise is not the plain model). When tried but AR(1) does not earn its place, the
-        original diagnosis with the record {model: "white", ar1_evidence}; also when AR(1) earns its place
-        but leaves structure that no term explains either (then with ``ar1_rho`` and ``ar1_explains``
-        False): a deterministic disturbance pushes ρ towards 1 without whitening the residuals.
+    (Diagnosis, dict, RunConfig)
+        The diagnosis, the ``noise`` record and the configuration it used. The chosen models are adopted
+        (``adopted`` true, ``model`` ``ar1`` or ``per_point``, ``rho``, ``evidence``) when the white diagnosis
+        accepts no term but leaves structure in a flight with markers, evidence chose AR(1) or per-point noise
+        for some flight, and under them a term explains the structure or none is left. Otherwise the white
+        diagnosis stays (``model`` ``white``, ``ar1_evidence``); when the chosen models were tried and leave
+        the structure too, ``ar1_rho`` and ``ar1_explains`` false: a deterministic disturbance pushes ρ towards
+        1 without whitening the residuals. ``choice`` always holds the per-flight records.
     """
-    base = diag.base
-    problem = base.problem
-    marker_flights = {f.name for f, ch in zip(problem.flights, problem.channels) if any(c.id == "markers" for c in ch)}
+    records = choice.records
+    chosen = {f: r for f, r in records.items() if r["by"] == "evidence" and r["label"] != r["reference"]}
+    ar1 = {f: r["rho"][r["label"]] for f, r in chosen.items() if r["label"] in r["rho"]}
+    evidence = float(sum(r["delta_bic"][r["label"]] for r in chosen.values()))
+    tried = [r["delta_bic"]["ar1"] for r in records.values() if (r.get("delta_bic") or {}).get("ar1") is not None]
+    white = {"model": "white", "adopted": False, "choice": records}
+    if tried:
+        white["ar1_evidence"] = float(sum(tried))
+    marker_flights = set(records)
     left = {f for f, series in diag.unexplained.items() if series}
-    if diag.accepted or not (left & marker_flights) or cfg.noise.model != "gaussian":
-        return None
-    cfg_ar = replace(cfg, noise=replace(cfg.noise, model="ar1"))
-    build = build_for(cfg_ar)
-    p_ar = build(base.ids)
-    x0 = p_ar.layout.transfer(base.ls.theta, problem.layout, p_ar.start_vector())
-    ls = refine_least_squares(p_ar, x0, max_nfev=cfg.least_squares.max_nfev)
-    fit = model_fit(p_ar, ls, base.ids)
-    n = problem.n_coords.astype(float)
-    k = p_ar.dim - problem.dim
-    gain = float(np.sum(n * np.log(base.ss / fit.ss)) - k * np.log(np.sum(n)))
-    rho = {f.name: float(ls.theta[p_ar.names.index(f"rho_{f.name}")]) for f in p_ar.flights
-           if f"rho_{f.name}" in p_ar.names}
-    if not np.isfinite(gain) or gain <= EVIDENCE_THRESHOLD:
-        logger.info(f"AR(1) marker noise does not earn its place (ΔBIC {gain:.1f}); the noise is white")
-        return diag, {"model": "white", "ar1_evidence": gain}, cfg
-    logger.info("noise correlated: AR(1) marker noise, " + ", ".join(f"ρ {f} {r:.2f}" for f, r in rho.items())
-                + f" (ΔBIC {gain:.1f} over white noise); judging the candidates again with it")
-    again = diagnose(fit, build, processes=processes, max_nfev=cfg.least_squares.max_nfev,
-                     candidates=candidates, log=logger.info)
+    if diag.accepted or not (left & marker_flights) or not chosen:
+        return diag, white, cfg
+    logger.info("the white diagnosis leaves structure; judging the candidates again with the noise models chosen: "
+                + "; ".join(records[f]["text"] for f in chosen))
+    cfg_c = cfg.with_flight_noise(choice.settings())
+    build = build_for(cfg_c)
+    again = diagnose(model_fit(choice.problem, choice.ls, diag.base.ids), build, processes=processes,
+                     max_nfev=cfg.least_squares.max_nfev, candidates=candidates, log=logger.info)
     if again.accepted or not any(again.unexplained.values()):
-        return again, {"model": "ar1", "rho": rho, "evidence": gain}, cfg_ar
+        return again, {"model": "ar1" if ar1 else "per_point", "adopted": True, "rho": ar1,
+                       "evidence": evidence, "choice": records}, cfg_c
     # AR(1) only absorbs structure it cannot whiten (a gust, say, gives ρ → 1): not evidence of correlated noise
-    logger.info("AR(1) marker noise leaves the structure unexplained too; the diagnosis stays with white noise")
-    return diag, {"model": "white", "ar1_evidence": gain, "ar1_rho": rho, "ar1_explains": False}, cfg
+    logger.info("the chosen noise models leave the structure unexplained too; the diagnosis stays with white noise")
+    return diag, {**white, "ar1_rho": ar1, "ar1_explains": False}, cfg
 
 
 def _replication_record(c, problem) -> dict | None:
@@ -328,11 +333,12 @@ class Analysis:
     Attributes
     ----------
     cfg : RunConfig
-        The configuration the diagnosis was made with (its marker noise AR(1) when that earned its place).
+        The configuration the diagnosis was made with (with the chosen marker noise models when they were
+        adopted: :func:`correlated_noise`).
     diag : Diagnosis
         Base fit, ranked candidates, accepted terms, final fit.
     noise : dict or None
-        The ``noise`` record of :func:`correlated_noise` (None when AR(1) noise was not tried).
+        The ``noise`` record of :func:`correlated_noise` (None for a run without marker flights).
     skipped : dict
         Candidates not tried, with the reason.
     base_ids : tuple of str
@@ -385,6 +391,9 @@ def analyse(cfg: RunConfig, processes: int = 2, candidates=None) -> Analysis:
                 + (f" with {', '.join(base_ids)}" if base_ids else "") + "; fitting by least squares")
     ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
                            seed=cfg.sampler.seed)
+    choice = choose_noise(problem, ls, run_settings(cfg, problem), max_nfev=cfg.least_squares.max_nfev)
+    for line in choice.lines():
+        logger.info(f"noise choice: {line}")
     base = model_fit(problem, ls, base_ids)
     logger.info("base RMS " + rms_text(base.rms))
     tried, skipped = applicable_candidates(problem, [c for c in wanted if c not in base_ids])
@@ -393,10 +402,8 @@ def analyse(cfg: RunConfig, processes: int = 2, candidates=None) -> Analysis:
     logger.info(f"ranking {len(tried)} candidates by ΔBIC (each a least-squares refit):")
     diag = diagnose(base, build, processes=processes, max_nfev=cfg.least_squares.max_nfev,
                     candidates=tried, log=logger.info)
-    noise = correlated_noise(cfg, diag, build_for, tried, processes=processes)
-    if noise is not None:
-        diag, noise, cfg = noise
-    return Analysis(cfg, diag, noise, skipped, base_ids, problem, build_for)
+    diag, noise, cfg = correlated_noise(cfg, diag, build_for, tried, choice, processes=processes)
+    return Analysis(cfg, diag, noise if choice.records else None, skipped, base_ids, problem, build_for)
 
 
 def estimates_before(analysis: Analysis, out: Path) -> dict:

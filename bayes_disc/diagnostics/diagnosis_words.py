@@ -103,6 +103,16 @@ def _rejected_text(c: dict) -> str:
             f"{_share_text(c.get('share_explained'))} of the excess misfit, less than {100 * SHARE_PARTIAL:.0f} %)")
 
 
+def choice_words(noise: dict) -> list[str]:
+    """One line listing the marker noise ``sample`` uses per flight (``noise.choice``), when it is not white
+    noise for every flight; none otherwise."""
+    choice = noise.get("choice") or {}
+    if all(r.get("label") == "white" for r in choice.values()):
+        return []
+    return ["Marker noise as `sample` chooses it at the base model's least squares: "
+            + "; ".join(r["text"] for r in choice.values()) + "."]
+
+
 def words(result: dict) -> str:
     """The diagnosis in words (printed by the command, shown in the report)."""
     lines = []
@@ -120,6 +130,7 @@ def words(result: dict) -> str:
                      + (f" and no candidate earns its place (ΔBIC > {EVIDENCE_THRESHOLD:.0f} with white residuals; "
                         f"best: {best['id']}, ΔBIC {best['evidence']:.1f})." if best else "."))
         lines.append("RMS " + rms_text(before) + ".")
+        lines += [] if noise.get("adopted") else choice_words(noise)
         lines += [w["words"] for w in (result.get("wobble") or {}).values()]
         if skipped:
             lines.append("Not tried: " + ", ".join(f"{c} ({why})" for c, why in skipped.items()) + ".")
@@ -142,8 +153,10 @@ def words(result: dict) -> str:
         else:
             lines.append("No base coefficient moved by more than 2 sd.")
     if noise.get("ar1_explains") is False:
-        lines.append(f"Correlated (AR(1)) marker noise was tried (ΔBIC {noise['ar1_evidence']:.0f} over white noise) "
-                     "and leaves the structure below unexplained too, so it is not taken as the explanation.")
+        tried = (f"Correlated (AR(1)) marker noise was tried (ΔBIC {noise['ar1_evidence']:.0f} over white noise)"
+                 if noise.get("ar1_rho") else "The per-point noise chosen was tried")
+        lines.append(f"{tried} and leaves the structure below unexplained too, so it is not taken as the explanation.")
+    lines += [] if noise.get("adopted") else choice_words(noise)
     for u in ([] if partial else result["unexplained"]):
         a, b = u["peak_window_s"]
         onset = u["model_follows_until_s"]

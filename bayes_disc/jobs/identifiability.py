@@ -11,6 +11,7 @@ Writes ``<output>/identifiability.json``:
      "posterior": {contraction, correlation, verdicts, agreement} (when `sample` has run),
      "data": {markers, inertial, inertial_only, text},
      "least_squares": {cost, rms_mm (marker flights), noise: {sigma name: {value, unit}}, lower_optima},
+     "noise_choice": {flight: record} (the marker noise models `sample` uses, fitted here too),
      "design": {"weak", "recommendation", "best", "ranking": [...]} or {"skipped": reason}}
 
 Runs with inertial logs: the entries besides the ten coefficients include the logger's shared mount
@@ -34,6 +35,7 @@ from ..diagnostics.identifiability import (ALPHA_PAIRS, coefficient_information,
 from ..inference.model.config import RunConfig
 from ..inference.model.data import build_problem
 from ..inference.fitting.leastsq import fit_least_squares, noise_text
+from ..inference.fitting.noise_choice import choose_noise, run_settings
 from ..inference.fitting.residuals import jacobian_blocks
 from ..inference.fitting.profile import profiles_through_lowest
 from .outputs import Outcome
@@ -165,6 +167,10 @@ def run_identifiability(cfg: RunConfig, profiles: bool = False, design: bool = T
     names = problem.names[:nc]
     ls = fit_least_squares(problem, starts=cfg.least_squares.starts, max_nfev=cfg.least_squares.max_nfev,
                            seed=cfg.sampler.seed)
+    choice = choose_noise(problem, ls, run_settings(cfg, problem), max_nfev=cfg.least_squares.max_nfev)
+    problem, ls = choice.problem, choice.ls          # the marker noise `sample` would use: the information under it
+    for line in choice.lines():
+        logger.info(f"noise choice: {line}")
     (out / "least_squares.json").write_text(json.dumps(ls.to_dict(), indent=1))   # the optimum (predict --from)
     logger.info(f"{cfg.name}: least squares cost {ls.cost:.1f}, residual RMS {noise_text(ls.noise())}")
     # profiles first: a path that reaches below the optimum has the least squares refitted (and everything
@@ -183,6 +189,7 @@ def run_identifiability(cfg: RunConfig, profiles: bool = False, design: bool = T
                                      floors)
     result = {n: {"verdict": v["verdict"], "reason": v["reason"]} for n, v in coefs.items()}
     result.update({"coefficients": coefs, "envelope": envelope, "fisher": fisher, "data": data,
+                   "noise_choice": choice.records,
                    "least_squares": {"cost": ls.cost, "rms_mm": marker_rms, "noise": noise,
                                      "lower_optima": ls.lower_optima}})
     if prof is not None:

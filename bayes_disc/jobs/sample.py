@@ -1,7 +1,8 @@
 """The sampling job of ``bayes-disc sample``: least squares, then emcee.
 
-Writes summary.json, posterior.nc, run_info.json and the least-squares result into the run's output folder
-(and ``flagged.json``, the points judged outliers and frames judged label-swapped, and
+Writes summary.json, posterior.nc, run_info.json, the least-squares result and ``noise_choice.json`` (each
+marker flight's noise model and why: :mod:`bayes_disc.inference.fitting.noise_choice`) into the run's output
+folder (and ``flagged.json``, the points judged outliers and frames judged label-swapped, and
 ``judgement_average.json``, the posterior averaged over that judgement, for ``robust`` marker noise:
 :mod:`bayes_disc.inference.fitting.robust`).
 :func:`sample` runs this job, then the run's HTML report (:func:`.outputs.build_run_report`).
@@ -38,6 +39,7 @@ from ..inference.results.posterior_file import writing_posterior
 from ..inference.results.summary import build_summary, format_table
 from ..inference.fitting.robust import (FLAGGED, JUDGEMENT_AVERAGE, average_over_judgement, gross_error_advice,
                                 robust_flights, robust_refit, suspected_gross_errors, with_saved_flags)
+from ..inference.fitting.noise_choice import NOISE_CHOICE, choose_noise, run_settings, with_saved_choice
 from ..inference.sampling.chains import saved_steps
 from ..inference.sampling.mixing import n_walkers
 from ..inference.sampling.sampler import run_sampler
@@ -176,6 +178,28 @@ def _save_least_squares(ls, out: Path) -> dict:
     np.save(out / "least_squares_cov.npy", ls.cov)
     np.save(out / "least_squares_theta.npy", ls.theta)
     return ls_dict
+
+
+def _noise_choice(problem, ls, ls_dict: dict, cfg: RunConfig, out: Path):
+    """Each ``auto`` flight's marker noise model chosen by evidence
+    (:func:`bayes_disc.inference.fitting.noise_choice.choose_noise`): written to ``noise_choice.json``, one
+    log line per marker flight, the least-squares files rewritten when the choice refitted them. Returns
+    (problem, least squares, its record) with the chosen models."""
+    with stage("noise choice", "each auto flight's marker noise model by evidence (white, AR(1), per-point, "
+                               "robust)") as st:
+        def report(label, flights):
+            logger.info(f"noise choice: refitting with {label} noise on {', '.join(flights)} ({st.elapsed:.0f} s)")
+        choice = choose_noise(problem, ls, run_settings(cfg, problem), max_nfev=cfg.least_squares.max_nfev,
+                              progress=report)
+        choice.save(out)
+        for line in choice.lines():
+            logger.info(f"noise choice: {line}")
+        if choice.ls is not ls:
+            ls_dict = _save_least_squares(choice.ls, out)
+        labels = [r["label"] for r in choice.records.values()]
+        st.result = (", ".join(f"{labels.count(lab)} {lab}" for lab in dict.fromkeys(labels)) or "no marker flight") \
+            + f" (listed in {out / NOISE_CHOICE})"
+    return choice.problem, choice.ls, ls_dict
 
 
 def flag_lines(flags: dict) -> list[str]:
@@ -322,7 +346,11 @@ def _read_problem(cfg: RunConfig, out: Path, resume: bool):
     with stage("reading flights and checks") as st:
         throws = load_run_throws(cfg) if cfg.imu else []
         problem = raw = build_problem(cfg, throws=throws)
-        if resume and robust_flights(problem) and (out / FLAGGED).is_file() and (out / "chains" / RUN_KEY).is_file():
+        saved = resume and (out / "chains" / RUN_KEY).is_file()
+        if saved and (out / NOISE_CHOICE).is_file():
+            problem = raw = with_saved_choice(problem, out)
+            logger.info(f"resume: the saved choice of marker noise models ({out / NOISE_CHOICE}) is applied")
+        if saved and robust_flights(problem) and (out / FLAGGED).is_file():
             problem = with_saved_flags(problem, out)
             logger.info(f"resume: the saved judgement of outliers and label swaps ({out / FLAGGED}) is applied")
         st.result = f"{cfg.name}: {data_words(problem)}, {problem.dim} parameters"
@@ -336,8 +364,9 @@ def _read_problem(cfg: RunConfig, out: Path, resume: bool):
 
 def _prepare_sampling(cfg: RunConfig, problem, out: Path, resume: bool, progress: bool):
     """Before sampling: on resume, the saved chains' step counts and least squares (the proposals are saved
-    with the chains); otherwise least squares, the robust fit, the profiles and their proposal. Returns
-    (problem, least-squares record, proposal or None, saved steps or None)."""
+    with the chains); otherwise least squares, the choice of noise models, the robust fit, the profiles and
+    their proposal. Returns (problem as read with its noise models, problem sampled (robust flights
+    cleaned), least-squares record, proposal or None, saved steps or None)."""
     if resume and (out / "chains" / RUN_KEY).is_file():
         check_same_run(cfg, problem, out)       # before counting chain files: the ensembles may differ
     steps = saved_steps(out, cfg.sampler.ensembles) if resume else None
@@ -354,14 +383,16 @@ def _prepare_sampling(cfg: RunConfig, problem, out: Path, resume: bool, progress
         else:
             logger.info(f"resume: reusing the saved least-squares optimum (cost {ls_dict['cost']:.1f}) and the "
                         "proposals saved with the chains")
-        return problem, ls_dict, None, steps    # the sampler continues with the approximation saved beside its chains
+        return None, problem, ls_dict, None, steps    # the sampler continues with the approximation saved beside its chains
     ls, ls_dict = _least_squares(problem, cfg, out)
+    problem, ls, ls_dict = _noise_choice(problem, ls, ls_dict, cfg, out)
+    raw = problem
     problem, ls, ls_dict = _robust(problem, ls, ls_dict, cfg, out)
     proposal, ls = posterior_approximation(problem, ls, cfg.sampler.processes, out, progress=progress,
                                            max_nfev=cfg.least_squares.max_nfev)
     (out / "chains").mkdir(exist_ok=True)
     (out / "chains" / RUN_KEY).write_text(json.dumps(run_key(cfg, problem), indent=1))
-    return problem, ls.to_dict(), proposal, None
+    return raw, problem, ls.to_dict(), proposal, None
 
 
 def _write_outputs(cfg: RunConfig, problem, chains, ls_dict: dict, throws, steps, out: Path, t0: float):
@@ -370,6 +401,8 @@ def _write_outputs(cfg: RunConfig, problem, chains, ls_dict: dict, throws, steps
     with stage("outputs", "summary.json, posterior.nc, run_info.json"):
         info = {"name": cfg.name, "config": str(cfg.path), "flights": flight_info(problem),
                 "sampler_settings": asdict(cfg.sampler), "markers": cfg.markers, "noise": noise_info(problem)}
+        if (out / NOISE_CHOICE).is_file():
+            info["noise_choice"] = json.loads((out / NOISE_CHOICE).read_text())
         if (out / FLAGGED).is_file() and robust_flights(problem):
             flags = json.loads((out / FLAGGED).read_text())
             info["flagged"] = {"file": FLAGGED, "outliers": sum(len(f["outliers"]) for f in flags.values()),
@@ -422,7 +455,8 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
     out = Path(cfg.output)
     out.mkdir(parents=True, exist_ok=True)
     throws, raw, problem = _read_problem(cfg, out, resume)
-    problem, ls_dict, proposal, steps = _prepare_sampling(cfg, problem, out, resume, progress)
+    chosen, problem, ls_dict, proposal, steps = _prepare_sampling(cfg, problem, out, resume, progress)
+    raw = raw if chosen is None else chosen
     s = cfg.sampler
     with stage("sampling", f"{s.ensembles} ensembles × {n_walkers(s, problem)} walkers until R-hat < {s.rhat:g}, "
                            f"ESS ≥ {s.ess:g}, N/τ ≥ {s.n_tau:g} (cap {s.max_steps} steps)") as st:

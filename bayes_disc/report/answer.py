@@ -1,4 +1,5 @@
-"""The report's first screen: what was estimated, the coefficients, and three one-line verdicts.
+"""The report's first screen: what was estimated, the coefficients, three one-line verdicts and the marker
+noise model of every flight with the reason it was chosen (``noise_choice`` in ``summary.json``).
 
 The verdicts answer "can I trust this?" in one line each:
 
@@ -273,6 +274,60 @@ def answer_table(ctx) -> str:
     return table(heads, rows, "num answer")
 
 
+def noise_choice_rows(choice: dict) -> list[list[str]]:
+    """One row per marker flight of ``summary.json``'s ``noise_choice``: flight, its marker noise, and why.
+
+    Parameters
+    ----------
+    choice : dict
+        {flight: record} (:class:`bayes_disc.inference.fitting.noise_choice.NoiseChoice`).
+
+    Returns
+    -------
+    list of [flight, model, reason]
+    """
+    rows = []
+    for flight, r in choice.items():
+        label = r.get("label", "")
+        model = NOISE_WORDS.get(label, label)
+        rho = (r.get("rho") or {}).get(label)
+        if rho is not None:
+            model += f", ρ̂ = {rho:.2f} per frame"
+        by = r.get("by")
+        if by == "configuration":
+            why = "as configured"
+        elif by == "gross errors":
+            why = (f"{r.get('outliers', 0)} point(s) judged gross errors and {r.get('swaps', 0)} frame(s) "
+                   "label-swapped at the white fit; removed before sampling")
+        else:
+            ref, delta = r.get("reference"), r.get("delta_bic") or {}
+            others = {k: v for k, v in delta.items() if k != ref and v is not None}
+            if label == ref:
+                best = max(others, key=others.get, default=None)
+                why = ("no candidate reaches ΔBIC > " + _evidence(r.get("threshold_delta_bic"))
+                       + (f" (best: {NOISE_WORDS.get(best, best)}, {others[best]:+.1f})" if best else ""))
+            else:
+                why = f"ΔBIC {delta[label]:+.0f} over {NOISE_WORDS.get(ref, ref)} noise"
+        rows.append([flight, model, why])
+    return rows
+
+
+#: noise labels (``noise_choice``) in words
+NOISE_WORDS = {"white": "white", "per_point": "white, per-point errors", "ar1": "AR(1)",
+               "ar1_per_point": "AR(1), per-point errors", "robust": "robust (gross errors removed)"}
+
+
+def noise_choice_html(summary: dict) -> str:
+    """The marker noise of every flight and why, for the first screen ("" for a run without the record)."""
+    choice = summary.get("noise_choice") or {}
+    if not choice:
+        return ""
+    auto = any(r.get("by") != "configuration" for r in choice.values())
+    how = "<code>noise: auto</code> chooses by evidence at the least squares; " if auto else ""
+    return (f"<p class=note>Marker noise per flight ({how}<code>noise_choice</code> in summary.json):</p>"
+            + table(["flight", "marker noise", "why"], noise_choice_rows(choice), "noise-choice"))
+
+
 def qualified_by_adequacy(ident: Verdict, diagnosis: dict | None) -> Verdict:
     """The identifiability line, qualified when ``diagnose`` left structure no term explains: the verdicts
     then describe the curvature of a model the data reject, so "identified" is not a finding.
@@ -296,7 +351,8 @@ def qualified_by_adequacy(ident: Verdict, diagnosis: dict | None) -> Verdict:
     return Verdict(ident.topic, "attention", text, ident.command, ident.link)
 
 def answer_section(ctx) -> Section:
-    """The first screen: what was estimated, the three verdicts, the coefficient table."""
+    """The first screen: what was estimated, the three verdicts, the coefficient table, each flight's marker
+    noise (below the table, which stays on screen without scrolling)."""
     conv = convergence_verdict(ctx.summary["convergence"], ctx.summary.get("sampler_settings"))
     ident = identifiability_verdict(ctx.run.extras.get("identifiability"), ctx.coefficients, ctx.run.config_path)
     diag = ctx.run.extras.get("diagnosis")
@@ -309,5 +365,5 @@ def answer_section(ctx) -> Section:
                 "<i>out</i> is a finding, not an error. Rate coefficients (CMq, CRr, CRp, CNr) are per rad/s; "
                 "Potts &amp; Crowther give none. Details, 95 % intervals, R-hat and ESS per coefficient: "
                 '<a href="#coefficients">Coefficients</a>.</p>')
-    html = estimated_text(ctx) + verdicts + answer_table(ctx) + lit_note
+    html = estimated_text(ctx) + verdicts + answer_table(ctx) + lit_note + noise_choice_html(ctx.summary)
     return Section("answer", "Result", "", html)   # no reading guide: the first screen explains itself

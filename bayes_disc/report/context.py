@@ -171,9 +171,11 @@ class ReportContext:
         from ..inference.model.data import build_problem
         from ..observation.config_io import ConfigError
         from ..observation.markers import MarkerFileError
+        from ..inference.fitting.noise_choice import with_saved_choice
         from ..inference.fitting.robust import with_saved_flags
-        try:
-            problem = with_saved_flags(build_problem(self.config), self.run.run_dir)   # robust runs: cleaned data
+        try:      # the noise models the run chose, robust flights cleaned as it judged
+            problem = with_saved_flags(with_saved_choice(build_problem(self.config), self.run.run_dir),
+                                       self.run.run_dir)
         except (ConfigError, MarkerFileError, FileNotFoundError) as e:
             raise ReportInputError(self.run.config_path, f"cannot rebuild the run's data: {e}") from None
         from ..inference.model.describe import flight_info

@@ -25,7 +25,8 @@ physics: {side_force: {CY: 0.0}}        # extra terms (physics.TERMS) and data e
 flight_options:                          # per flight, by name
   fffl10: {t_start: 0.0, t_end: 0.8,     # time window [s]
            noise: {model: ar1}}          # this flight's noise model (overrides the top-level keys given)
-noise: {model: gaussian, per_point: auto}   # marker noise model (gaussian | ar1) and per-point errors
+noise: {model: auto, per_point: auto}   # marker noise model (auto | gaussian | ar1 | robust; auto: chosen
+                                         # per flight by evidence at the least squares) and per-point errors
                                          # (auto: use sigma_m / covariance columns when the file has them)
 truth: truth.json                        # optional truth file (synthetic data) for reports
 imu:                                     # inertial logs (instead of or besides `flights`)
@@ -49,6 +50,10 @@ from ...physics.kernel import DEFAULT_METHOD, TABLEAUX
 from .priors import CoefficientPrior, prior_around
 
 PRIORS = ("potts_crowther", "weak")
+#: ``noise.model: auto``: each flight's marker noise model chosen by evidence
+AUTO = "auto"
+#: ``noise.model`` values of a run configuration
+NOISE_CHOICES = (AUTO,) + NOISE_MODELS
 
 
 @dataclass(frozen=True)
@@ -77,9 +82,13 @@ class LeastSquaresSettings:
 @dataclass(frozen=True)
 class NoiseSettings:
     """Marker noise of a flight (:mod:`bayes_disc.observation.models.noise`): the model and whether
-    per-point errors (``sigma_m`` or covariance columns) are used (``auto``: when the file has them)."""
+    per-point errors (``sigma_m`` or covariance columns) are used (``auto``: when the file has them).
 
-    model: str = "gaussian"
+    ``model: auto`` (the default) leaves the choice among white, AR(1), per-point and robust noise to the
+    evidence at the least squares (:mod:`bayes_disc.inference.fitting.noise_choice`); any other value is used
+    as given."""
+
+    model: str = AUTO
     per_point: str = "auto"
 
 
@@ -185,6 +194,26 @@ class RunConfig:
         if o is None or not o.noise:
             return self.noise, "noise"
         return replace(self.noise, **o.noise), f"flight_options.{flight}.noise"
+
+    def with_flight_noise(self, chosen: dict) -> "RunConfig":
+        """This configuration with the noise of some flights set explicitly.
+
+        Parameters
+        ----------
+        chosen : dict
+            {flight: {"model": ..., "per_point": ...}}, e.g. the models ``noise: auto`` chose
+            (:meth:`bayes_disc.inference.fitting.noise_choice.NoiseChoice.settings`).
+
+        Returns
+        -------
+        RunConfig
+            The same run with those flights' ``flight_options.<flight>.noise`` set (their windows kept).
+        """
+        options = dict(self.flight_options)
+        for flight, noise in chosen.items():
+            o = options.get(flight, FlightOption())
+            options[flight] = replace(o, noise={**o.noise, **noise})
+        return replace(self, flight_options=options)
 
 
 def load_config(path, output_override=None) -> RunConfig:
@@ -317,7 +346,7 @@ def config_from_mapping(data: dict, path, output_override=None) -> RunConfig:
 def _read_noise(path: Path, sec: Section, defaults: NoiseSettings | None) -> dict:
     """A ``noise:`` block → {field: value} (with ``defaults`` filled in; without, only the keys given)."""
     out = {}
-    model = sec.string("model", None if defaults is None else defaults.model, choices=NOISE_MODELS)
+    model = sec.string("model", None if defaults is None else defaults.model, choices=NOISE_CHOICES)
     if model is not None:
         out["model"] = model
     pp = sec.raw("per_point", None if defaults is None else defaults.per_point)

@@ -8,7 +8,7 @@ from ...observation.markers import load_flights
 from ...observation.plausibility import check_flights
 from ...observation.registry import split_extensions
 from ...physics import SimulatorSettings
-from .config import RunConfig
+from .config import AUTO, RunConfig
 from ...observation.models import MarkerPositions
 from ...observation.models.magnetometer import MAG_OWN_PARAMETERS
 from .inertial import (heading_start, inertial_model, level_start, load_run_throws, magnetometer_shared_start,
@@ -57,6 +57,12 @@ def build_problem(cfg: RunConfig, terms_override=None, flights=None, throws=None
         are fitted. A throw named like a marker flight is the same flight seen by both (its marker times
         must start at release).
 
+    Notes
+    -----
+    A marker flight whose ``noise.model`` is ``auto`` gets white Gaussian noise here (per-point errors as its
+    ``per_point`` says): the model the evidence for the others is measured against
+    (:func:`bayes_disc.inference.fitting.noise_choice.choose_noise`).
+
     Returns
     -------
     Problem
@@ -77,8 +83,9 @@ def build_problem(cfg: RunConfig, terms_override=None, flights=None, throws=None
         except ValueError as e:
             raise ConfigError(cfg.path, "flights", str(e)) from None
         noise, key = cfg.flight_noise(f.name)
+        model = "gaussian" if noise.model == AUTO else noise.model    # auto: white until the evidence is in
         try:
-            channels = [MarkerPositions(f, mb, tuple(explanations), noise_model=noise.model, per_point=noise.per_point)]
+            channels = [MarkerPositions(f, mb, tuple(explanations), noise_model=model, per_point=noise.per_point)]
         except ValueError as e:
             raise ConfigError(cfg.path, key, str(e)) from None
         extra = [p.off_value for p in channels[0].parameters]

@@ -272,6 +272,45 @@ class Problem:
                        rates=self.rates, kernel_terms=self.kernel_terms, observations=observations,
                        own_start=self.own_start)
 
+    def with_marker_noise(self, noise: dict) -> "Problem":
+        """The same problem with some flights' marker noise models replaced.
+
+        Parameters
+        ----------
+        noise : dict
+            {flight name: (model, per_point)} (:func:`~bayes_disc.observation.models.noise.marker_noise`).
+
+        Returns
+        -------
+        Problem
+            Same data, model and starts; a replaced model's own parameters (e.g. ``rho``) start at their off
+            values, the flight's other channels keep theirs.
+
+        Raises
+        ------
+        ValueError
+            For a flight without markers, or a noise model its data do not allow (naming the flight).
+        """
+        x0 = self.start_vector()
+        own = [x0[self.layout.own_slice(k)] for k in range(self.n_flights)]
+        observations = []
+        for k, (f, ch) in enumerate(zip(self.flights, self.channels)):
+            if f.name not in noise:
+                observations.append(ch)
+                continue
+            marker = next((c for c in ch if isinstance(c, MarkerPositions)), None)
+            if marker is None:
+                raise ValueError(f"flight {f.name!r} has no marker recording: its noise model is its sensors'")
+            model, per_point = noise[f.name]
+            new = MarkerPositions(marker.data, marker.marker_body, marker.explanations, model, per_point)
+            own[k] = np.r_[[p.off_value for p in new.parameters], own[k][len(marker.parameters):]]
+            observations.append(tuple(new if c is marker else c for c in ch))
+        return Problem(flights=self.flights, marker_body=self.marker_body, disc=self.disc, env=self.env,
+                       prior_name=self.prior_name, terms=self.terms, explanations=self.explanations,
+                       start_states=self.start_states, term_start=self.term_start, settings=self.settings,
+                       rates=self.rates, kernel_terms=self.kernel_terms, observations=observations,
+                       own_start=own)
+
     def start_vector(self) -> np.ndarray:
         """(dim,) prior means with the extension parameters at their starting values."""
         x = self.prior_mean.copy()
