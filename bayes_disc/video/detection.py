@@ -12,8 +12,12 @@ For a grey frame I (DN; uint8, uint16 or float) and an optional background image
 
    with k = ``noise_floor_sigma`` (pixel centres at integer coordinates, OpenCV convention). The
    centroid's covariance propagates the pixel noise through these weights,
-   C = Σ_(w>0) (x − c)(x − c)ᵀ var / (Σ w)², var = σ_b² + (DN step)²/12 (+ (I − B − b)/``gain`` when the
-   gain in e⁻/DN is given): a wide, faint or smeared blob has a larger one than a small bright one;
+   C = Σ_(w>0) (x − c)(x − c)ᵀ var / (Σ w)², var = σ_b² + (DN step)²/12 + (I − B − b)/g: a wide, faint
+   or smeared blob has a larger one than a small bright one. The shot-noise term needs the gain g
+   (e⁻/DN): given as ``gain``, it is included; otherwise its part per unit 1/g is kept apart
+   (``Blobs.cov_shot``) and each isolated blob reports how its pixels scatter about a fitted Gaussian
+   (``Blobs.shot_stats``): pooled over a camera's blobs, var(r) = σ_b² + m/g gives 1/g (a photon
+   transfer measured on the markers themselves; the tracker does this per camera);
 3. flags (bit mask):
 
    - ``SATURATED``: a pixel at or above the saturation level (the centroid stays usable: clipping is
@@ -47,6 +51,7 @@ import cv2
 import numpy as np
 
 from .deblend import deblend_groups, fit_spots, min_separation, peaks
+from .psf import spots
 
 SATURATED = 1
 ELONGATED = 2
@@ -94,7 +99,7 @@ class DetectionConfig:
             raise ValueError("detection.gain must be positive")
 
 
-_FIELDS = ("uv", "area", "flux", "peak", "elongation", "flags", "cov", "width")
+_FIELDS = ("uv", "area", "flux", "peak", "elongation", "flags", "cov", "width", "cov_shot", "shot_stats")
 
 
 @dataclass
@@ -102,7 +107,11 @@ class Blobs:
     """Blobs of one frame: uv (n, 2) centroids [px]; area (n,) [px]; flux (n,) background-subtracted
     sum [DN]; peak (n,) brightest raw pixel [DN]; elongation (n,) ≥ 1; flags (n,) bit mask; cov (n, 2, 2)
     covariance of the centroid [px²] from the noise around the blob (or from the deblending fit); width
-    (n,) RMS width along the blob's major axis [px]."""
+    (n,) RMS width along the blob's major axis [px]; cov_shot (n, 2, 2) the shot-noise part of the
+    centroid covariance per unit 1/gain [px² DN] (zero when the gain is given: then it is in ``cov``);
+    shot_stats (n, 2): (Σ m (r² − σ_b² − 1/12), Σ m²) over the pixels of a Gaussian fitted to an isolated
+    blob (m: the model [DN], r: the residual [DN]) — summed over many blobs, their ratio estimates 1/gain
+    [DN per e⁻] (zeros when not measured)."""
 
     uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     area: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
@@ -112,6 +121,8 @@ class Blobs:
     flags: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
     width: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cov_shot: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
+    shot_stats: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
     def __len__(self) -> int:
         return len(self.uv)
@@ -207,9 +218,11 @@ def _moments(S: np.ndarray, own, others, window, cfg: DetectionConfig, quantum: 
     """Weighted centroid of a window (see the module docstring) and its covariance.
 
     Returns None when no pixel has weight, else (cx, cy, total weight, elongation, major-axis RMS width
-    [px], background b, RMS width σ̄ [px], covariance (2, 2) [px²]). The covariance propagates the noise
-    of the weighted pixels: C = Σ w>0 (x − c)(x − c)ᵀ var / W², var = σ_b² + quantum²/12 (+ signal/gain
-    with a gain), σ_b the noise of the window's border ring (1.4826 × MAD)."""
+    [px], background b, RMS width σ̄ [px], covariance (2, 2) [px²], shot-noise covariance per unit 1/gain
+    (2, 2) [px² DN]). The covariance propagates the noise of the weighted pixels: C = Σ w>0 (x − c)(x − c)ᵀ
+    var / W², var = σ_b² + quantum²/12 (+ signal/gain with a gain), σ_b the noise of the window's border
+    ring (1.4826 × MAD); without a gain the shot-noise part Σ w>0 (x − c)(x − c)ᵀ signal / W² is returned
+    apart, for the gain to be fitted later (:mod:`.refine`)."""
     wx0, wy0, wx1, wy1 = window
     ring = np.zeros(S.shape, bool)
     ring[0, :] = ring[-1, :] = ring[:, 0] = ring[:, -1] = True
@@ -240,11 +253,19 @@ def _moments(S: np.ndarray, own, others, window, cfg: DetectionConfig, quantum: 
     disc = max(tr * tr / 4 - det, 0.0) ** 0.5
     l1, l2 = tr / 2 + disc, max(tr / 2 - disc, 1e-12)
     var = np.where(wgt > 0, sig * sig + quantum * quantum / 12.0, 0.0)
+    shot = np.where(wgt > 0, np.maximum(S - b, 0), 0.0)
+    cov = _spread(var, dx, dy, tot)
+    cov_shot = _spread(shot, dx, dy, tot)
     if cfg.gain is not None:
-        var = var + np.where(wgt > 0, np.maximum(S - b, 0) / cfg.gain, 0.0)
-    cov = np.array([[float(var.sum(axis=0) @ (dx * dx)), float(dy @ var @ dx)],
-                    [float(dy @ var @ dx), float(var.sum(axis=1) @ (dy * dy))]]) / (tot * tot)
-    return cx, cy, tot, float(np.sqrt(l1 / l2)), float(np.sqrt(l1)), b, float(np.sqrt(max(tr / 2 - 1 / 12, 0.09))), cov
+        cov, cov_shot = cov + cov_shot / cfg.gain, np.zeros((2, 2))
+    return (cx, cy, tot, float(np.sqrt(l1 / l2)), float(np.sqrt(l1)), b, float(np.sqrt(max(tr / 2 - 1 / 12, 0.09))),
+            cov, cov_shot)
+
+
+def _spread(var: np.ndarray, dx: np.ndarray, dy: np.ndarray, tot: float) -> np.ndarray:
+    """Σ var (x − c)(x − c)ᵀ / tot² over a window (rows y, columns x) [px² × units of var]."""
+    xy = float(dy @ var @ dx)
+    return np.array([[float(var.sum(axis=0) @ (dx * dx)), xy], [xy, float(var.sum(axis=1) @ (dy * dy))]]) / (tot * tot)
 
 
 def _split(S, b, own, labels_w, window, origin, tot, peaks_found):
@@ -282,7 +303,7 @@ def _measure(signal: np.ndarray, raw: np.ndarray, labels: np.ndarray, stats: np.
         mom = _moments(S, own, others, window, cfg, quantum)
         if mom is None:
             continue
-        cx, cy, tot, elong, width, b, sbar, cov = mom
+        cx, cy, tot, elong, width, b, sbar, cov, cov_shot = mom
         peak_raw = float(raw[wy0:wy1, wx0:wx1][own].max())
         flags = SATURATED if peak_raw >= sat else 0
         gx0, gy0 = x0 + x_off, y0 + y_off
@@ -299,7 +320,7 @@ def _measure(signal: np.ndarray, raw: np.ndarray, labels: np.ndarray, stats: np.
             if fit is not None:  # two or more markers in one component, split by a joint fit
                 for j in range(len(found)):
                     rows.append(((fit[0][j], fit[1][j]), area, float(fit[3][j]), peak_raw, 1.0, flags | CROWDED,
-                                 fit[4][j], float(fit[2][j])))
+                                 fit[4][j], float(fit[2][j]), cov_shot / len(found), np.zeros(2)))
                     info.append((-1, window, b, float(fit[2][j]), set()))
                     cut.append(touches)
                 continue
@@ -308,7 +329,10 @@ def _measure(signal: np.ndarray, raw: np.ndarray, labels: np.ndarray, stats: np.
             flags |= ELONGATED
         if cfg.expected_area is not None and area > (cfg.merge_area_ratio or 2.0) * cfg.expected_area:
             flags |= MERGED
-        rows.append(((cx + x_off, cy + y_off), area, tot, peak_raw, elong, flags, cov, width))
+        stats_ = np.zeros(2)
+        if cfg.gain is None and flags == 0:
+            stats_ = _shot_stats(S, b, own, others, window, (x_off, y_off), (cx, cy, sbar, tot), quantum)
+        rows.append(((cx + x_off, cy + y_off), area, tot, peak_raw, elong, flags, cov, width, cov_shot, stats_))
         info.append((k, window, b, sbar, neighbours))
         cut.append(touches)
     blobs = _blobs_from_rows(rows)
@@ -320,10 +344,35 @@ def _measure(signal: np.ndarray, raw: np.ndarray, labels: np.ndarray, stats: np.
 def _blobs_from_rows(rows: list) -> Blobs:
     if not rows:
         return Blobs()
-    uv, area, flux, peak, el, flags, cov, width = zip(*rows)
+    uv, area, flux, peak, el, flags, cov, width, cov_shot, shot = zip(*rows)
     return Blobs(np.array(uv, float).reshape(-1, 2), np.array(area, int), np.array(flux, float), np.array(peak, float),
                  np.array(el, float), np.array(flags, int), np.array(cov, float).reshape(-1, 2, 2),
-                 np.array(width, float))
+                 np.array(width, float), np.array(cov_shot, float).reshape(-1, 2, 2), np.array(shot, float).reshape(-1, 2))
+
+
+def _shot_stats(S, b: float, own, others, window, offset, start, quantum: float) -> np.ndarray:
+    """(Σ m (r² − σ_b² − quantum²/12), Σ m²) of a round Gaussian fitted to an isolated blob's window (module
+    docstring of :class:`Blobs`); zeros when the fit fails. start: (cx, cy, σ, flux) in region pixels."""
+    wx0, wy0 = window[0], window[1]
+    ring = np.zeros(S.shape, bool)
+    ring[0, :] = ring[-1, :] = ring[:, 0] = ring[:, -1] = True
+    ring &= ~own & ~others
+    if ring.sum() < 8:
+        return np.zeros(2)
+    data = S.astype(np.float64) - b
+    origin = (wx0 + offset[0], wy0 + offset[1])
+    cx, cy, sbar, tot = start
+    fit = fit_spots(data, ~others, origin, np.array([cx + offset[0]]), np.array([cy + offset[1]]),
+                    np.array([max(sbar, 0.5)]), np.array([max(tot, 1.0)]), 1.5)
+    if fit is None:
+        return np.zeros(2)
+    model = spots(data.shape, origin, fit[0], fit[1], fit[2], fit[3])
+    vals = data[ring]
+    s2 = (1.4826 * _median(np.abs(vals - _median(vals)))) ** 2
+    r2 = (data - model) ** 2
+    valid = ~others
+    return np.array([float(np.sum((model * (r2 - s2 - quantum * quantum / 12.0))[valid])),
+                     float(np.sum((model * model)[valid]))])
 
 
 def flag_bright(blobs: Blobs, cfg: DetectionConfig) -> Blobs:

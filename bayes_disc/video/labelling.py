@@ -20,17 +20,20 @@ from .detection import Blobs, detect_full, detect_roi
 from .errors import VideoInputError
 from .identity import Tracker, label_frame
 from .refine import Views
+from .sync import centre_velocity, moved_blobs
 
 
 @dataclass
 class FramePass:
     """Result of :func:`label_frames`: reference frames (F,), the labelled views, ambiguous (F, M): a
-    marker left unlabelled because its identity was not certain, and counts for the report."""
+    marker left unlabelled because its identity was not certain, counts for the report, and per camera
+    the pooled shot-noise statistics of its usable blobs (C, 2) (:class:`.detection.Blobs`)."""
 
     frames: np.ndarray
     views: Views
     ambiguous: np.ndarray
     stats: dict = field(default_factory=dict)
+    shot_stats: np.ndarray = None
 
 
 def median_background(src, first: int, last: int, n: int):
@@ -130,35 +133,18 @@ def _to_reference_instant(uv: np.ndarray, cam, tracker: Tracker, f: int, delay: 
 
 def _moved(uv, cam, tracker, f: int, delay: float, pred, cached, i: int) -> np.ndarray:
     """A delayed camera's blobs moved to the reference instant: by the tracker's prediction when there is
-    one, else (acquisition) by the image velocity of the blobs' centre (spin about the centre left)."""
+    one, else (acquisition) along each blob's own track through the neighbouring frames
+    (:func:`.sync.moved_blobs`)."""
     if abs(delay) < 1e-6 or len(uv) == 0:
         return uv
     if pred is not None:
         return _to_reference_instant(uv, cam, tracker, f, delay, pred)
     if cached is None:
         return uv
-    return uv - delay * _cloud_velocity(cached, i)
-
-
-def _cloud_velocity(cached: dict, i: int) -> np.ndarray:
-    """Image velocity [px/frame] of the centre of a camera's usable blobs around its frame i (central
-    difference of the centres in frames i ± 1, or a one-sided one), zero when they cannot be compared
-    (a frame missing, a different number of blobs)."""
-    def centre(k):
-        b = cached.get(k)
-        if b is None:
-            return None, 0
-        u = b.uv[b.usable]
-        return (u.mean(axis=0) if len(u) else None), len(u)
-
-    (a, na), (c, nc), (b, nb) = centre(i - 1), centre(i), centre(i + 1)
-    if a is not None and b is not None and na == nb:
-        return (b - a) / 2
-    if c is not None and b is not None and nc == nb:
-        return b - c
-    if a is not None and c is not None and na == nc:
-        return c - a
-    return np.zeros(2)
+    near = {k: cached[k].uv[cached[k].usable] for k in (i - 1, i, i + 1) if k in cached}
+    if i not in near or len(near[i]) != len(uv):
+        return uv - delay * centre_velocity(near, i)
+    return moved_blobs(near, delay)[i]
 
 
 def label_frames(cfg, cams: list, srcs: list, offsets: list, backgrounds: list, cached=None,
@@ -178,6 +164,7 @@ def label_frames(cfg, cams: list, srcs: list, offsets: list, backgrounds: list, 
     counts = {"ROI detections": 0, "full-frame detections": 0}
     missing = [0] * C
     n_blobs, unusable = 0, {"merged": 0, "edge": 0}
+    shot = np.zeros((C, 2))
     for k, f in enumerate(tqdm(frames, desc=f"track {cfg.flight}", unit="frame", disable=not progress)):
         pred, psig = tracker.predict(int(f))
         usable = []
@@ -191,6 +178,7 @@ def label_frames(cfg, cams: list, srcs: list, offsets: list, backgrounds: list, 
             for key, v in blobs.reasons().items():
                 unusable[key] += v
             usable.append(blobs.subset(blobs.usable))
+            shot[c] += usable[-1].shot_stats.sum(axis=0)
         moved = [u.uv if delays is None else _moved(u.uv, cams[c], tracker, int(f), delays[c], pred,
                                                     None if cached is None else cached[c], int(f - offsets[c]))
                  for c, u in enumerate(usable)]
@@ -202,7 +190,8 @@ def label_frames(cfg, cams: list, srcs: list, offsets: list, backgrounds: list, 
             views.uv[k, m, c] = usable[c].uv[j]
             views.cov[k, m, c] = usable[c].cov[j]
             views.width[k, m, c] = usable[c].width[j]
+            views.cov_shot[k, m, c] = usable[c].cov_shot[j]
     stats = {"frames missing per camera": dict(zip([c.name for c in cams], missing)), **counts, "blobs": n_blobs,
              "blobs left out (merged)": unusable["merged"], "blobs left out (cut by the frame border)": unusable["edge"],
              "ambiguous labels left NaN": int(ambiguous.sum())}
-    return FramePass(frames, views, ambiguous, stats)
+    return FramePass(frames, views, ambiguous, stats, shot)

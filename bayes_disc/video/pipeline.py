@@ -37,8 +37,8 @@ from .errors import VideoInputError
 from .footage import open_source
 from .imports import read_xypts, read_xyzpts, reprojection_check
 from .labelling import FramePass, backgrounds_of, detect_all, label_frames
-from .refine import Views, refine, shifted, triangulate_views
-from .sync import SyncResult, estimate_frame_offsets, estimate_subframe, typical_motion
+from .refine import CameraNoise, Views, refine, shifted, shot_noise, triangulate_views
+from .sync import SyncResult, coarse_subframe, estimate_frame_offsets, estimate_subframe, typical_motion
 from .track_config import CameraInput, TrackConfig, parse_track_config  # noqa: F401  (the configuration API)
 from .triangulation import triangulate
 from ..observation.markers import COV_COLUMNS, COV_INDEX
@@ -146,20 +146,24 @@ def _open_sources(cfg: TrackConfig, sources: dict | None) -> list:
     return out
 
 
-def _synchronise(cfg: TrackConfig, cams: list, names: list, cached) -> SyncResult:
-    """Frame offsets: the given ones (a fraction is a sub-frame delay) and, with ``cached`` detections,
-    the others estimated (:mod:`.sync`)."""
+def _synchronise(cfg: TrackConfig, cams: list, names: list, usable) -> SyncResult:
+    """Frame offsets: the given ones (a fraction is a sub-frame delay) and, from ``usable`` (per camera
+    {camera frame: usable centroids}), the others estimated (:mod:`.sync`), with a first guess of their
+    sub-frame delays."""
     given = {i.name: i.frame_offset for i in cfg.inputs if i.frame_offset is not None}
     whole = {n: int(round(v)) for n, v in given.items()}
     if all(i.frame_offset is not None for i in cfg.inputs):
         sync = SyncResult(offsets=dict(whole), source={n: "config" for n in whole})
     else:
-        usable = [{i: b.uv[b.usable] for i, b in d.items()} for d in cached]
         tau = cfg.sync.tau_px if cfg.sync.tau_px is not None else max(3.0, 0.5 * typical_motion(usable))
         try:
             sync = estimate_frame_offsets(cams, names, usable, whole, cfg.sync.max_offset, tau)
         except ValueError as e:
             raise VideoInputError(f"{cfg.path}: {e}") from None
+        free = [c for c, n in enumerate(names) if sync.source[n] == "estimated"]
+        if cfg.sync.subframe and free:
+            guess = coarse_subframe(cams, names, usable, sync.offsets, free, 1.5)
+            sync.subframe.update({names[c]: guess[c] for c in free})
     for n, v in given.items():
         sync.subframe[n] = float(v) - whole[n]
     return sync
@@ -178,11 +182,14 @@ def track_footage(cfg: TrackConfig, sources: dict | None = None, progress: bool 
         # detect every frame first when offsets are to be estimated or a camera has a sub-frame delay
         estimate = any(i.frame_offset is None or i.frame_offset != round(i.frame_offset) for i in cfg.inputs)
         cached = detect_all(cfg, cams, srcs, backgrounds, progress) if estimate else None
-        sync = _synchronise(cfg, cams, names, cached)
+        usable = None if cached is None else [{i: b.uv[b.usable] for i, b in d.items()} for d in cached]
+        sync = _synchronise(cfg, cams, names, usable)
         offsets = [sync.offsets[n] for n in names]
-        fp = label_frames(cfg, cams, srcs, offsets, backgrounds, cached, progress)
+        start = [sync.subframe.get(n, 0.0) for n in names]
+        fp = label_frames(cfg, cams, srcs, offsets, backgrounds, cached, progress,
+                          start if any(start) else None)
         delays = _subframe_delays(cfg, cams, names, _views_for_covariance(cfg, fp.views), sync)
-        if any(abs(d) >= 0.05 for d in delays.values()):
+        if any(abs(delays[c] - start[c]) >= 0.02 for c in range(len(cams))):
             # label again with the delayed cameras' blobs moved to the reference instants
             fp = label_frames(cfg, cams, srcs, offsets, backgrounds, cached, progress,
                               [delays[c] for c in range(len(cams))])
@@ -198,6 +205,7 @@ def _views_for_covariance(cfg: TrackConfig, views: Views) -> Views:
         return views
     views = views.copy()
     views.cov[views.seen] = cfg.pixel_sigma ** 2 * np.eye(2)
+    views.cov_shot[:] = 0.0
     return views
 
 
@@ -208,7 +216,7 @@ def _subframe_delays(cfg: TrackConfig, cams: list, names: list, views: Views, sy
     free = [c for c, n in enumerate(names) if sync.source.get(n) == "estimated"]
     if not (free and cfg.sync.subframe):
         return delays
-    floor = np.full(len(cams), 0.3)
+    floor = CameraNoise(np.full(len(cams), 0.3), np.zeros(len(cams)))
 
     def loss(d: dict) -> float:
         tri = triangulate_views(cams, shifted(views, d), floor, cfg.identity.min_views)
@@ -228,8 +236,10 @@ def _second_pass(cfg: TrackConfig, cams: list, names: list, fp: FramePass, sync:
     """Sub-frame shift, view refinement, checks; the result with flags and metadata."""
     F, M = fp.views.uv.shape[:2]
     views = shifted(_views_for_covariance(cfg, fp.views), {c: d for c, d in delays.items() if d}, names)
-    ref = refine(cams, views, names, calibrate=cfg.pixel_sigma is None, min_views=cfg.identity.min_views,
-                 level=cfg.outlier_level)
+    auto = cfg.pixel_sigma is None
+    alpha = shot_noise(fp.shot_stats) if auto and cfg.detection.gain is None else np.zeros(len(cams))
+    ref = refine(cams, views, names, CameraNoise(np.zeros(len(cams)), alpha), calibrate=auto,
+                 min_views=cfg.identity.min_views, level=cfg.outlier_level)
     tri = ref.tri
     xyz, cov = tri.xyz.reshape(F, M, 3), tri.cov.reshape(F, M, 3, 3)
     checks = check_points(xyz, cov, cfg.layout, cfg.checks)
@@ -245,7 +255,10 @@ def _second_pass(cfg: TrackConfig, cams: list, names: list, fp: FramePass, sync:
     stats = dict(fp.stats)
     stats["views left out"] = ref.dropped
     stats["points flagged by the checks"] = int(np.sum(checks.flag != ""))
-    stats["camera pixel noise added (px)"] = {n: round(float(v), 4) for n, v in zip(names, ref.camera_sigma)}
+    stats["camera pixel noise added (px)"] = {n: round(float(v), 4) for n, v in zip(names, ref.noise.sigma)}
+    if cfg.pixel_sigma is None and cfg.detection.gain is None:
+        stats["gain measured on the blobs (e-/DN)"] = {n: (round(1 / a, 2) if a > 1e-9 else "no shot noise seen")
+                                                       for n, a in zip(names, ref.noise.alpha)}
     stats["frame offsets"] = {n: round(sync.total(n), 4) for n in names}
     if sync.messages:
         stats["synchronisation"] = " | ".join(sync.messages)
@@ -253,8 +266,9 @@ def _second_pass(cfg: TrackConfig, cams: list, names: list, fp: FramePass, sync:
             "timestamps": {"convention": cfg.timestamps, "exposure_s": cfg.exposure_s,
                            "row_time": "middle of the exposure of the reference frame: t0 + f / fps"
                                        + (" + exposure_s / 2" if cfg.timestamps == "exposure-start" else "")},
-            "cameras": {n: {**sync.as_dict()[n], "pixel_noise_px": round(float(s), 4)}
-                        for n, s in zip(names, ref.camera_sigma)},
+            "cameras": {n: {**sync.as_dict()[n], "pixel_noise_px": round(float(s), 4),
+                            "shot_noise_per_gain": round(float(a), 5)}
+                        for n, s, a in zip(names, ref.noise.sigma, ref.noise.alpha)},
             "pixel_sigma": "auto" if cfg.pixel_sigma is None else cfg.pixel_sigma,
             "checks": {"action": cfg.checks.action, "prediction_sigma_m": checks.prediction_sigma}}
     times = cfg.t0 + fp.frames / cfg.fps + cfg.time_shift

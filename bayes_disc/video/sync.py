@@ -200,6 +200,95 @@ def _search(free: list, fixed: dict, choices, total) -> list:
     return sorted(variants, key=lambda x: x[1])
 
 
+def centre_velocity(blobs: dict, i: int) -> np.ndarray:
+    """Image velocity [px/frame] of the centre of a camera's blobs around its frame i: central difference
+    of the centres in frames i ± 1, else a one-sided one; zero when no two neighbouring frames hold the
+    same number of blobs. blobs: {camera frame: centroids (n, 2)}."""
+    def centre(k):
+        u = blobs.get(k)
+        return (None, 0) if u is None or len(u) == 0 else (u.mean(axis=0), len(u))
+
+    (a, na), (c, nc), (b, nb) = centre(i - 1), centre(i), centre(i + 1)
+    if a is not None and b is not None and na == nb:
+        return (b - a) / 2
+    if c is not None and b is not None and nc == nb:
+        return b - c
+    if a is not None and c is not None and na == nc:
+        return c - a
+    return np.zeros(2)
+
+
+def _match(u: np.ndarray, other, shift: np.ndarray, radius: float) -> np.ndarray:
+    """For each blob u (n, 2), the blob of ``other`` (k, 2) nearest to u + shift if within ``radius``
+    and that blob's nearest in return (mutual); NaN rows otherwise."""
+    out = np.full(u.shape, np.nan)
+    if other is None or len(other) == 0 or len(u) == 0:
+        return out
+    d = np.linalg.norm((u + shift)[:, None] - other[None], axis=2)
+    j = np.argmin(d, axis=1)
+    back = np.argmin(d, axis=0)
+    ok = (d[np.arange(len(u)), j] < radius) & (back[j] == np.arange(len(u)))
+    out[ok] = other[j[ok]]
+    return out
+
+
+def moved_blobs(blobs: dict, delay: float) -> dict:
+    """A camera's blobs exposed ``delay`` frames late, moved to the reference instants before any marker
+    is labelled: each blob is matched with the nearest blob of the previous and next frames (after the
+    motion of the blobs' centre, :func:`centre_velocity`; mutual nearest, within half the smallest
+    distance between the frame's blobs) and the quadratic through the three (linear through two) is
+    evaluated at −delay; an unmatched blob moves by −delay × the centre's velocity."""
+    if abs(delay) < 1e-9:
+        return blobs
+    s = -delay
+    out = {}
+    for i, u in blobs.items():
+        if len(u) == 0:
+            out[i] = u
+            continue
+        v = centre_velocity(blobs, i)
+        sep = np.linalg.norm(u[:, None] - u[None], axis=2) + np.eye(len(u)) * 1e9
+        radius = max(1.0, 0.5 * float(sep.min())) if len(u) > 1 else 10.0
+        prev, nxt = _match(u, blobs.get(i - 1), -v, radius), _match(u, blobs.get(i + 1), v, radius)
+        both = np.all(np.isfinite(prev), axis=1) & np.all(np.isfinite(nxt), axis=1)
+        res = u + s * v
+        res[both] = (s * (s - 1) / 2) * prev[both] + (1 - s * s) * u[both] + (s * (s + 1) / 2) * nxt[both]
+        only_n = ~both & np.all(np.isfinite(nxt), axis=1)
+        res[only_n] = u[only_n] + s * (nxt[only_n] - u[only_n])
+        only_p = ~both & ~only_n & np.all(np.isfinite(prev), axis=1)
+        res[only_p] = u[only_p] - s * (prev[only_p] - u[only_p])
+        out[i] = res
+    return out
+
+
+def coarse_subframe(cameras: list, names: list, blobs: list, offsets: dict, free: list, tau_px: float,
+                    step: float = 0.05) -> dict:
+    """First guess of the sub-frame delays {camera index: δ} of the cameras in ``free`` before any marker
+    is labelled: each camera's blobs are moved by −δ × their centre's velocity (:func:`moved_blobs`) and
+    δ is chosen on a grid of ``step`` in [−½, ½] to minimise the pair costs against the other cameras
+    (cameras in turn, twice)."""
+    C = len(cameras)
+    delays = {c: 0.0 for c in range(C)}
+    grid = np.arange(-0.5, 0.5 + 1e-9, step)
+    for _ in range(2):
+        for c in free:
+            def cost(d):
+                moved = moved_blobs(blobs[c], d)
+                num = den = 0.0
+                for o in range(C):
+                    if o == c:
+                        continue
+                    other = moved_blobs(blobs[o], delays[o])
+                    k = offsets[names[c]] - offsets[names[o]]
+                    val, n = pair_cost(cameras[o], cameras[c], other, moved, k, tau_px)
+                    if n and np.isfinite(val):
+                        num += val * n
+                        den += n
+                return num / den if den else np.inf
+            delays[c] = float(min(grid, key=cost))
+    return delays
+
+
 def golden_minimum(fun, lo: float, hi: float, tol: float = 1e-3) -> float:
     """Minimiser of a unimodal function on [lo, hi] by golden-section search (to ``tol``)."""
     g = (np.sqrt(5.0) - 1) / 2
