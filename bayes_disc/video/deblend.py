@@ -61,30 +61,40 @@ def fit_spots(data, valid, origin, u0, v0, s0, f0, max_shift: float):
     return u, v, sg, fl, centre_covariance(data, valid, origin, u, v, sg, fl)
 
 
+def spot_jacobian(shape, valid, origin, u, v, sigma, flux) -> tuple[np.ndarray, np.ndarray]:
+    """Model of spots (n,) on a window (``shape``, top-left pixel ``origin``) and its Jacobian: returns the
+    model on the valid pixels (p,) [DN] and J (p, 4n) with respect to (u, v, ln σ, F) of each spot."""
+    n = len(u)
+    h, w = shape
+    x0, y0 = int(origin[0]), int(origin[1])
+    d = 1e-4
+
+    def ax(c, s, first, count):
+        return pixel_integrals(c, s, first, count)
+
+    ex, ey = ax(u, sigma, x0, w), ax(v, sigma, y0, h)
+    dex = (ax(u + d, sigma, x0, w) - ax(u - d, sigma, x0, w)) / (2 * d)
+    dey = (ax(v + d, sigma, y0, h) - ax(v - d, sigma, y0, h)) / (2 * d)
+    dsx = (ax(u, sigma * (1 + d), x0, w) - ax(u, sigma * (1 - d), x0, w)) / (2 * d)
+    dsy = (ax(v, sigma * (1 + d), y0, h) - ax(v, sigma * (1 - d), y0, h)) / (2 * d)
+    m = np.asarray(valid, bool).ravel()
+    cols = []
+    for s in range(n):
+        cols += [flux[s] * np.outer(ey[s], dex[s]), flux[s] * np.outer(dey[s], ex[s]),
+                 flux[s] * (np.outer(dsy[s], ex[s]) + np.outer(ey[s], dsx[s])), np.outer(ey[s], ex[s])]
+    J = np.stack([c.ravel()[m] for c in cols], axis=1)
+    model = sum(flux[s] * np.outer(ey[s], ex[s]) for s in range(n)).ravel()[m]
+    return model, J
+
+
 def centre_covariance(data, valid, origin, u, v, sigma, flux) -> np.ndarray:
     """Covariance (n, 2, 2) [px²] of fitted spot centres: the (u, v) block of (JᵀJ)⁻¹ s² for the model of
     :func:`fit_spots` at its solution, s² = Σ r² / (pixels − parameters) over the valid pixels."""
     n = len(u)
-    h, w = data.shape
-    ex = pixel_integrals(u, sigma, int(origin[0]), w)        # (n, w)
-    ey = pixel_integrals(v, sigma, int(origin[1]), h)        # (n, h)
-    d = 1e-4
-    dex = (pixel_integrals(u + d, sigma, int(origin[0]), w) - pixel_integrals(u - d, sigma, int(origin[0]), w)) / (2 * d)
-    dey = (pixel_integrals(v + d, sigma, int(origin[1]), h) - pixel_integrals(v - d, sigma, int(origin[1]), h)) / (2 * d)
-    dsx = (pixel_integrals(u, sigma * (1 + d), int(origin[0]), w) - pixel_integrals(u, sigma * (1 - d), int(origin[0]), w)) / (2 * d)
-    dsy = (pixel_integrals(v, sigma * (1 + d), int(origin[1]), h) - pixel_integrals(v, sigma * (1 - d), int(origin[1]), h)) / (2 * d)
-    m = valid.ravel()
-    cols = []
-    for s in range(n):
-        g = np.outer(ey[s], ex[s])
-        cols += [flux[s] * np.outer(ey[s], dex[s]), flux[s] * np.outer(dey[s], ex[s]),
-                 flux[s] * (np.outer(dsy[s], ex[s]) + np.outer(ey[s], dsx[s])), g]
-    J = np.stack([c.ravel()[m] for c in cols], axis=1)       # (pixels, 4n): u, v, ln σ, F per spot
-    model = sum(flux[s] * np.outer(ey[s], ex[s]) for s in range(n)).ravel()[m]
-    r = model - np.asarray(data, float).ravel()[m]
-    dof = max(m.sum() - 4 * n, 1)
-    s2 = float(r @ r) / dof
-    cov = np.linalg.pinv(J.T @ J) * s2
+    model, J = spot_jacobian(np.shape(data), valid, origin, u, v, sigma, flux)
+    r = model - np.asarray(data, float).ravel()[np.asarray(valid, bool).ravel()]
+    dof = max(len(r) - 4 * n, 1)
+    cov = np.linalg.pinv(J.T @ J) * (float(r @ r) / dof)
     out = np.empty((n, 2, 2))
     for s in range(n):
         idx = [4 * s, 4 * s + 1]

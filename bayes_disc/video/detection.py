@@ -50,8 +50,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .deblend import deblend_groups, fit_spots, min_separation, peaks
-from .psf import spots
+from .deblend import deblend_groups, fit_spots, min_separation, peaks, spot_jacobian
 
 SATURATED = 1
 ELONGATED = 2
@@ -351,8 +350,10 @@ def _blobs_from_rows(rows: list) -> Blobs:
 
 
 def _shot_stats(S, b: float, own, others, window, offset, start, quantum: float) -> np.ndarray:
-    """(Σ m (r² − σ_b² − quantum²/12), Σ m²) of a round Gaussian fitted to an isolated blob's window (module
-    docstring of :class:`Blobs`); zeros when the fit fails. start: (cx, cy, σ, flux) in region pixels."""
+    """(Σ m (r² − (1 − h)(σ_b² + quantum²/12)), Σ (1 − h) m²) of a round Gaussian fitted to an isolated blob's
+    window (m: model, r: residual [DN], h: the fit's leverage of each pixel, which takes that share of the
+    pixel's noise out of its residual); zeros when the fit fails. start: (cx, cy, σ, flux), region pixels.
+    Summed over many blobs, the ratio is 1/gain, since E[r²] = (1 − h)(σ_b² + m/g)."""
     wx0, wy0 = window[0], window[1]
     ring = np.zeros(S.shape, bool)
     ring[0, :] = ring[-1, :] = ring[:, 0] = ring[:, -1] = True
@@ -362,17 +363,18 @@ def _shot_stats(S, b: float, own, others, window, offset, start, quantum: float)
     data = S.astype(np.float64) - b
     origin = (wx0 + offset[0], wy0 + offset[1])
     cx, cy, sbar, tot = start
-    fit = fit_spots(data, ~others, origin, np.array([cx + offset[0]]), np.array([cy + offset[1]]),
+    valid = ~others
+    fit = fit_spots(data, valid, origin, np.array([cx + offset[0]]), np.array([cy + offset[1]]),
                     np.array([max(sbar, 0.5)]), np.array([max(tot, 1.0)]), 1.5)
     if fit is None:
         return np.zeros(2)
-    model = spots(data.shape, origin, fit[0], fit[1], fit[2], fit[3])
+    model, J = spot_jacobian(data.shape, valid, origin, fit[0], fit[1], fit[2], fit[3])
+    lev = np.einsum("pi,ij,pj->p", J, np.linalg.pinv(J.T @ J), J)
     vals = data[ring]
-    s2 = (1.4826 * _median(np.abs(vals - _median(vals)))) ** 2
-    r2 = (data - model) ** 2
-    valid = ~others
-    return np.array([float(np.sum((model * (r2 - s2 - quantum * quantum / 12.0))[valid])),
-                     float(np.sum((model * model)[valid]))])
+    s2 = (1.4826 * _median(np.abs(vals - _median(vals)))) ** 2 + quantum * quantum / 12.0
+    r2 = (data[valid] - model) ** 2
+    keep = 1.0 - np.clip(lev, 0.0, 1.0)
+    return np.array([float(np.sum(model * (r2 - keep * s2))), float(np.sum(keep * model * model))])
 
 
 def flag_bright(blobs: Blobs, cfg: DetectionConfig) -> Blobs:

@@ -257,7 +257,7 @@ def _second_pass(cfg: TrackConfig, cams: list, names: list, fp: FramePass, sync:
     stats["points flagged by the checks"] = int(np.sum(checks.flag != ""))
     stats["camera pixel noise added (px)"] = {n: round(float(v), 4) for n, v in zip(names, ref.noise.sigma)}
     if cfg.pixel_sigma is None and cfg.detection.gain is None:
-        stats["gain measured on the blobs (e-/DN)"] = {n: (round(1 / a, 2) if a > 1e-9 else "no shot noise seen")
+        stats["gain measured on the blobs (e-/DN)"] = {n: (round(float(1 / a), 2) if a > 1e-9 else "no shot noise seen")
                                                        for n, a in zip(names, ref.noise.alpha)}
     stats["frame offsets"] = {n: round(sync.total(n), 4) for n in names}
     if sync.messages:

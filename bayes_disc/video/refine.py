@@ -302,8 +302,13 @@ def refine(cameras: list, views: Views, names, noise: CameraNoise | None = None,
         if n_overlap:
             tri = triangulate_views(cameras, views, noise, min_views)
         if calibrate:
-            noise = camera_noise(tri, views, noise)
-            tri = triangulate_views(cameras, views, noise, min_views)
+            for _ in range(6):     # the residuals and leverages change with the weights: to the fixed point
+                new = camera_noise(tri, views, noise)
+                tri = triangulate_views(cameras, views, new, min_views)
+                done = np.all(np.abs(new.sigma - noise.sigma) <= 0.01 * new.sigma + 1e-4)
+                noise = new
+                if done:
+                    break
         n_out, n_pts = drop_outliers(tri, views, noise, names, level)
         dropped["overlap"] += n_overlap
         dropped["outlier"] += n_out

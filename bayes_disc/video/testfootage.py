@@ -54,6 +54,8 @@ class TestCamera:
     (x_centre, half_width, level DN) or None.
     """
 
+    __test__ = False  # a footage class, not a test case for pytest
+
     name: str
     dlt: tuple
     image_size: tuple
@@ -70,6 +72,8 @@ class TestFlight:
     pitch0 + pitch_rate t [rad]; spin [rad/s] about the disc's axis; wobble amplitude [rad] at half the
     spin rate; duration [s] is set by the spec's frame count."""
 
+    __test__ = False  # a footage class, not a test case for pytest
+
     position: tuple = (0.0, 0.0, 1.3)
     velocity: tuple = (13.0, 0.4, 2.2)
     acceleration: tuple = (-2.0, 0.3, -3.6)
@@ -84,6 +88,8 @@ class TestFlight:
 @dataclass(frozen=True)
 class TestFootageSpec:
     """Everything the footage is made from (times in s, intensities in DN, pixels in px)."""
+
+    __test__ = False  # a footage class, not a test case for pytest
 
     cameras: tuple
     flight: TestFlight = TestFlight()
@@ -227,6 +233,8 @@ class TestFootage:
     the camera has a frame there; ``seen`` (C, F, M): visible, recorded, ≥ 95 % unoccluded and ≥ 3σ + 1 px
     from the image border — the positions a tracker can be asked to find.
     """
+
+    __test__ = False  # a footage class, not a test case for pytest
 
     def __init__(self, spec: TestFootageSpec):
         self.spec = spec
@@ -458,7 +466,7 @@ def write_test_footage(spec: TestFootageSpec, folder, progress: bool = True) -> 
         for row in np.array([c.dlt for c in spec.cameras]).T:
             w.writerow([repr(float(x)) for x in row])
     (folder / "track.yaml").write_text("# plain tracking configuration of the test footage: bayes-disc track track.yaml\n"
-                                       + yaml.safe_dump(track_config(spec, sources), sort_keys=False))
+                                       + yaml.safe_dump(track_config(spec, sources), sort_keys=False, default_flow_style=None))
     write_truth(footage, folder)
     info = truth_info(footage)
     (folder / "truth.json").write_text(json.dumps(info, indent=2))
