@@ -12,8 +12,10 @@ A triangulated point X_fm [m] with covariance Σ_fm [m²] is tested twice:
   in all, the pose at f is interpolated (c: least-squares quadratic in time; R: rotation vectors
   relative to the nearest pose, fitted linearly in time) and predicts X̂_fm = R p_m + c. The squared
   Mahalanobis distance e ᵀ (Σ_fm + s² I)⁻¹ e, e = X_fm − X̂_fm, is compared with the 1 − ``level``
-  quantile of χ²(3); s [m], the error of the prediction itself, is set from the flight's own points (the
-  median of those distances equals χ²(3)'s median).
+  quantile of χ²(3); s [m], the error of the prediction itself, is set from the points of the ten
+  neighbouring frames (the 90 % quantile of max(|e|² − tr Σ, 0) / 3 over them, divided by that of
+  χ²(3)/3): the motion of a disc is predicted less well in some parts of a flight, and for some markers,
+  than for others.
 
 A flagged point is either kept with its covariance inflated by the disagreement, Σ + e eᵀ + s² I (for a
 time flag) or Σ + Σ_bad sides (|X_m − X_n| − D_mn)² g gᵀ (for a layout flag) — its ellipsoid then reaches
@@ -52,7 +54,7 @@ class CheckConfig:
 @dataclass
 class CheckResult:
     """Per point (F, M): ``flag`` text ('' = passed), ``inflation`` (F, M, 3, 3) [m²] to add to the
-    covariance, and the scale s [m] of the time prediction."""
+    covariance, and the median scale s [m] of the time prediction."""
 
     flag: np.ndarray
     inflation: np.ndarray
@@ -107,8 +109,7 @@ def predict_from_neighbours(poses: dict, f: int, layout: np.ndarray, half: int =
         return None
     t = np.array(near, float) - f
     C = np.array([poses[k][1] for k in near])
-    A = np.vander(t, 3) if len(near) > 3 else np.vander(t, 3)
-    c_f = np.linalg.lstsq(A, C, rcond=None)[0][-1]
+    c_f = np.linalg.lstsq(np.vander(t, 3), C, rcond=None)[0][-1]
     k0 = min(near, key=lambda k: abs(k - f))
     R0 = poses[k0][0]
     rv = np.array([_rotvec(poses[k][0] @ R0.T) for k in near])
@@ -117,24 +118,16 @@ def predict_from_neighbours(poses: dict, f: int, layout: np.ndarray, half: int =
     return layout @ (_rotmat(phi_f) @ R0).T + c_f
 
 
-def _prediction_sigma(errs: list) -> float:
-    """s ≥ 0 [m] with median eᵀ(Σ + s² I)⁻¹e = median of χ²(3) over the (e, Σ) pairs."""
-    if len(errs) < 5:
+def _local_sigma(errs: dict, f: int, half: int = 5) -> float:
+    """Scale s [m] of the time prediction around frame f: from the points of frames f − half … f + half other
+    than f, s² = q₉₀(max(|e|² − tr Σ, 0) / 3) / 2.08 (2.08: the 90 % quantile of χ²(3)/3; the upper
+    quantile, because the prediction is worse for a marker far from the disc's centre); 0 with fewer than
+    4 points."""
+    vals = [max(float(e @ e - np.trace(S)), 0.0) / 3 for k in range(f - half, f + half + 1) if k != f
+            for e, S in errs.get(k, [])]
+    if len(vals) < 4:
         return 0.0
-    target = chi2_dist.ppf(0.5, 3)
-
-    def med(s):
-        return float(np.median([e @ np.linalg.solve(S + s * s * np.eye(3), e) for e, S in errs]))
-
-    if med(0.0) <= target:
-        return 0.0
-    lo, hi = 0.0, 1e-3
-    while med(hi) > target and hi < 1.0:
-        hi *= 2
-    for _ in range(40):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if med(mid) > target else (lo, mid)
-    return 0.5 * (lo + hi)
+    return float(np.sqrt(np.quantile(vals, 0.9) / 2.08))
 
 
 def check_points(xyz: np.ndarray, cov: np.ndarray, layout: np.ndarray, cfg: CheckConfig) -> CheckResult:
@@ -155,8 +148,7 @@ def check_points(xyz: np.ndarray, cov: np.ndarray, layout: np.ndarray, cfg: Chec
         if ambiguous:
             usable[f] = False
     poses = _poses(xyz, usable, layout)
-    preds = {}
-    errs = []
+    preds, errs = {}, {}
     for f in range(F):
         if not ok[f].any():
             continue
@@ -164,15 +156,16 @@ def check_points(xyz: np.ndarray, cov: np.ndarray, layout: np.ndarray, cfg: Chec
         if X is None:
             continue
         preds[f] = X
-        for m in np.flatnonzero(ok[f] & usable[f]):
-            errs.append((xyz[f, m] - X[m], cov[f, m]))
-    s = _prediction_sigma(errs)
+        errs[f] = [(xyz[f, m] - X[m], cov[f, m]) for m in np.flatnonzero(ok[f] & usable[f])]
     limit = chi2_dist.ppf(1 - cfg.level, 3)
+    scales = []
     for f, X in preds.items():
+        s = _local_sigma(errs, f)
+        scales.append(s)
         for m in np.flatnonzero(ok[f]):
             e = xyz[f, m] - X[m]
             q = e @ np.linalg.solve(cov[f, m] + s * s * np.eye(3), e)
             if q > limit:
                 flag[f, m] = (flag[f, m] + "; " if flag[f, m] else "") + f"time (χ² {q:.0f})"
                 infl[f, m] += np.outer(e, e) + s * s * np.eye(3)
-    return CheckResult(flag, infl, s)
+    return CheckResult(flag, infl, float(np.median(scales)) if scales else 0.0)

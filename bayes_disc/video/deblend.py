@@ -149,9 +149,9 @@ def deblend_groups(signal, labels, uv: np.ndarray, cov: np.ndarray, info: list, 
     (label, window (x0, y0, x1, y1), local background, σ estimate, neighbour labels); x_off, y_off: the
     region's offset in the frame. Groups of 2–6 blobs linked as neighbours are fitted together, other
     components getting zero weight; the fit is accepted when it converges with every centre within
-    1.5 px of its centroid and σ in [0.3, 10] px. The covariance of an accepted centre is the larger (in
-    trace) of the fit's and the centroid's, plus the square of half the move the fit made: a correction
-    is only as certain as the model of the neighbour's tail.
+    1.5 px of its centroid and σ in [0.3, 10] px. The covariance of an accepted centre is the fit's plus
+    the square of a quarter of the move the fit made: a correction is only as certain as the model of
+    the neighbour's tail.
     """
     label_to_idx = {inf[0]: i for i, inf in enumerate(info) if inf[0] > 0}
     parent = list(range(len(info)))
@@ -189,7 +189,6 @@ def deblend_groups(signal, labels, uv: np.ndarray, cov: np.ndarray, info: list, 
             continue
         move = np.stack([fit[0] - u0, fit[1] - v0], axis=1)
         for k, i in enumerate(members):
-            base = fit[4][k] if np.trace(fit[4][k]) > np.trace(cov[i]) else cov[i]
-            cov[i] = base + 0.25 * np.outer(move[k], move[k])
+            cov[i] = fit[4][k] + 0.25 * np.outer(move[k], move[k])
         uv[members, 0] = fit[0]
         uv[members, 1] = fit[1]

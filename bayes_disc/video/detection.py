@@ -27,7 +27,7 @@ For a grey frame I (DN; uint8, uint16 or float) and an optional background image
    - ``CROWDED``: another blob reached into the window and was masked. Its tail can still bias the
      centroid by up to a few tenths of a pixel, so with ``deblend`` the centroids of a group of
      crowded blobs are refined by a joint least-squares fit of pixel-integrated Gaussians
-     (:mod:`.deblend`), whose covariance (plus a quarter of the square of the correction) replaces the
+     (:mod:`.deblend`), whose covariance (plus the square of a quarter of the correction) replaces the
      centroid's. A single component with two or more separate intensity peaks (two
      markers touching in the image) is split by the same fit into crowded blobs;
    - ``MERGED``: a multi-peak component that could not be split, or (only when ``expected_area`` is
@@ -218,10 +218,10 @@ def _moments(S: np.ndarray, own, others, window, cfg: DetectionConfig, quantum: 
 
     Returns None when no pixel has weight, else (cx, cy, total weight, elongation, major-axis RMS width
     [px], background b, RMS width σ̄ [px], covariance (2, 2) [px²], shot-noise covariance per unit 1/gain
-    (2, 2) [px² DN]). The covariance propagates the noise of the weighted pixels: C = Σ w>0 (x − c)(x − c)ᵀ
+    (2, 2) [px² DN]). The covariance propagates the noise of the weighted pixels: C = Σ_(w>0) (x − c)(x − c)ᵀ
     var / W², var = σ_b² + quantum²/12 (+ signal/gain with a gain), σ_b the noise of the window's border
-    ring (1.4826 × MAD); without a gain the shot-noise part Σ w>0 (x − c)(x − c)ᵀ signal / W² is returned
-    apart, for the gain to be fitted later (:mod:`.refine`)."""
+    ring (1.4826 × MAD); without a gain the shot-noise part Σ_(w>0) (x − c)(x − c)ᵀ signal / W² is returned
+    apart, for the gain to be measured later (:mod:`.refine`)."""
     wx0, wy0, wx1, wy1 = window
     ring = np.zeros(S.shape, bool)
     ring[0, :] = ring[-1, :] = ring[:, 0] = ring[:, -1] = True
@@ -251,8 +251,9 @@ def _moments(S: np.ndarray, own, others, window, cfg: DetectionConfig, quantum: 
     tr, det = sxx + syy, sxx * syy - sxy * sxy
     disc = max(tr * tr / 4 - det, 0.0) ** 0.5
     l1, l2 = tr / 2 + disc, max(tr / 2 - disc, 1e-12)
-    var = np.where(wgt > 0, sig * sig + quantum * quantum / 12.0, 0.0)
-    shot = np.where(wgt > 0, np.maximum(S - b, 0), 0.0)
+    on = (wgt > 0).astype(np.float64)
+    var = on * (sig * sig + quantum * quantum / 12.0)
+    shot = on * np.maximum(S - b, 0)
     cov = _spread(var, dx, dy, tot)
     cov_shot = _spread(shot, dx, dy, tot)
     if cfg.gain is not None:
