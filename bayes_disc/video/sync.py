@@ -150,12 +150,15 @@ def estimate_frame_offsets(cameras: list, names: list, blobs: list, given: dict,
     ref = int(np.median(list(fixed.values())))
     choices = range(ref - max_offset, ref + max_offset + 1)
 
+    def pairs(assign: dict, camera=None):
+        for a, b in itertools.combinations(range(C), 2):
+            if (a in fixed and b in fixed) or (camera is not None and camera not in (a, b)):
+                continue
+            yield table[(a, b, assign[b] - assign[a])]
+
     def total(assign: dict) -> float:
         num = den = 0.0
-        for a, b in itertools.combinations(range(C), 2):
-            if a in fixed and b in fixed:
-                continue
-            cost, n = table[(a, b, assign[b] - assign[a])]
+        for cost, n in pairs(assign):
             if n and np.isfinite(cost):
                 num += cost * n
                 den += n
@@ -169,7 +172,7 @@ def estimate_frame_offsets(cameras: list, names: list, blobs: list, given: dict,
         result.offsets[names[c]] = int(best_assign[c])
         result.source[names[c]] = "estimated"
         result.cost[names[c]] = (best, second)
-        if not np.isfinite(best):
+        if not any(n for _, n in pairs(best_assign, c)):
             raise ValueError(f"camera {names[c]}: no frames overlap with the other cameras' for any offset within "
                              f"±{max_offset}; give its frame_offset")
         note = "" if second - best > 0.1 else " (weakly determined: the next best offset fits almost as well)"
