@@ -161,7 +161,8 @@ def label_frames(cfg, cams: list, srcs: list, offsets: list, backgrounds: list, 
     views = Views.empty(F, M, C)
     ambiguous = np.zeros((F, M), bool)
     tracker = Tracker(cfg.layout, cfg.identity)
-    counts = {"ROI detections": 0, "full-frame detections": 0}
+    counts = {"ROI detections": 0,
+              "full-frame detections": 0 if cached is None else sum(len(d) for d in cached)}
     missing = [0] * C
     n_blobs, unusable = 0, {"merged": 0, "edge": 0}
     shot = np.zeros((C, 2))

@@ -227,7 +227,7 @@ def _subframe_delays(cfg: TrackConfig, cams: list, names: list, views: Views, sy
     for c in free:
         sync.subframe[names[c]] = float(est[c])
         sync.subframe_se[names[c]] = float(se[c])
-        sync.messages.append(f"camera {names[c]}: sub-frame delay {est[c]:+.3f} frames estimated")
+        sync.messages.append(f"camera {names[c]}: sub-frame delay {est[c]:+.3f} ± {se[c]:.3f} frames estimated")
     return est
 
 

@@ -232,24 +232,7 @@ def parse_track_config(path) -> TrackConfig:
             raise sec.error("cameras", "at least two cameras are needed to triangulate")
         used = {i.name: cams[i.name] for i in inputs}
     ds = sec.section("detection")
-    try:
-        det = DetectionConfig(
-            threshold=ds.number("threshold", 30.0, positive=True), min_area=ds.number("min_area", 2, integer=True, minimum=1),
-            max_area=ds.number("max_area", 5000, integer=True, minimum=1), pad=ds.number("pad", 3, integer=True, minimum=1),
-            mask_dilation=ds.number("mask_dilation", 2, integer=True, nonnegative=True),
-            noise_floor_sigma=ds.number("noise_floor_sigma", 2.0, nonnegative=True),
-            saturation=ds.number("saturation", None, positive=True),
-            max_elongation=ds.number("max_elongation", 2.0, minimum=1.0),
-            merge_flux_ratio=ds.number("merge_flux_ratio", None, minimum=1.0),
-            merge_area_ratio=ds.number("merge_area_ratio", None, minimum=1.0),
-            gain=ds.number("gain", None, positive=True),
-            expected_area=ds.number("expected_area", None, positive=True),
-            roi_radius=ds.number("roi_radius", 16, integer=True, minimum=2), tile=ds.number("tile", 8, integer=True, minimum=2),
-            deblend=ds.boolean("deblend", True))
-    except ValueError as e:
-        if isinstance(e, VideoInputError):
-            raise
-        raise VideoInputError(f"{path}: key 'detection': {e}") from None
+    det = _detection(ds, path)
     roi = ds.boolean("roi", True)
     background = ds.string("background", "none", choices=("none", "median"))
     bg_frames = ds.number("background_frames", 25, integer=True, minimum=3)
@@ -330,6 +313,28 @@ def _checks(sec: Section) -> CheckConfig:
                       enabled=sec.boolean("enabled", True))
     sec.finish()
     return out
+
+
+def _detection(ds: Section, path: Path) -> DetectionConfig:
+    """The detection settings of a ``detection`` section (``roi`` and ``background`` are read by the caller)."""
+    try:
+        return DetectionConfig(
+            threshold=ds.number("threshold", 30.0, positive=True), min_area=ds.number("min_area", 2, integer=True, minimum=1),
+            max_area=ds.number("max_area", 5000, integer=True, minimum=1), pad=ds.number("pad", 3, integer=True, minimum=1),
+            mask_dilation=ds.number("mask_dilation", 2, integer=True, nonnegative=True),
+            noise_floor_sigma=ds.number("noise_floor_sigma", 2.0, nonnegative=True),
+            saturation=ds.number("saturation", None, positive=True),
+            max_elongation=ds.number("max_elongation", 2.0, minimum=1.0),
+            merge_flux_ratio=ds.number("merge_flux_ratio", None, minimum=1.0),
+            merge_area_ratio=ds.number("merge_area_ratio", None, minimum=1.0),
+            gain=ds.number("gain", None, positive=True),
+            expected_area=ds.number("expected_area", None, positive=True),
+            roi_radius=ds.number("roi_radius", 16, integer=True, minimum=2), tile=ds.number("tile", 8, integer=True, minimum=2),
+            deblend=ds.boolean("deblend", True))
+    except ValueError as e:
+        if isinstance(e, VideoInputError):
+            raise
+        raise VideoInputError(f"{path}: key 'detection': {e}") from None
 
 
 def _parse_import(sec: Section, cams: dict) -> ImportSpec:

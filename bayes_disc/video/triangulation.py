@@ -85,37 +85,10 @@ def _weights(uv_cov, seen, pixel_sigma: float) -> np.ndarray:
     return W
 
 
-def triangulate(cameras: list[Camera], uv, *, pixel_sigma: float = 0.1, uv_cov=None, min_views: int = 2,
-                iterations: int = 10, tol: float = 1e-10) -> Triangulation:
-    """Triangulate pixels uv (P, C, 2) seen by ``cameras`` (NaN = not seen).
-
-    Parameters
-    ----------
-    cameras : list of Camera
-        The C cameras.
-    uv : array_like (P, C, 2)
-        Observed pixels (NaN = not seen).
-    pixel_sigma : float
-        Isotropic centroid standard deviation [px] used when ``uv_cov`` is not given.
-    uv_cov : array_like (P, C, 2, 2), optional
-        Covariance of each observed pixel [px²]; the fit then minimises Σ rᵀ W r with W = uv_cov⁻¹ and the
-        point covariance is (Σ Jᵀ W J)⁻¹.
-    min_views : int
-        Views needed for a point (≥ 2).
-
-    Returns
-    -------
-    Triangulation
-    """
-    uv = np.asarray(uv, float)
-    if uv.ndim != 3 or uv.shape[1] != len(cameras) or uv.shape[2] != 2:
-        raise ValueError(f"uv must have shape (points, {len(cameras)}, 2), got {uv.shape}")
-    P_, C = uv.shape[:2]
-    seen = np.all(np.isfinite(uv), axis=-1)
-    W = _weights(uv_cov, seen, pixel_sigma)
-    n_views = seen.sum(axis=1)
-    X = triangulate_linear(cameras, uv)
-    active = (n_views >= max(2, min_views)) & np.all(np.isfinite(X), axis=1)
+def _gauss_newton(cameras, uv, W, X, active, seen, iterations: int, tol: float):
+    """Weighted Gauss–Newton on the active points (X updated in place). Returns the normal matrices
+    Σ Jᵀ W J (P, 3, 3), the residuals (P, C, 2) [px] and the Jacobians (P, C, 2, 3) at the final X."""
+    P_, C = seen.shape
     JTJ = np.zeros((P_, 3, 3))
     res = np.full((P_, C, 2), np.nan)
     jac = np.zeros((P_, C, 2, 3))
@@ -150,6 +123,41 @@ def triangulate(cameras: list[Camera], uv, *, pixel_sigma: float = 0.1, uv_cov=N
             step = np.stack([np.linalg.lstsq(a, -b, rcond=None)[0] for a, b in zip(JTJ[idx], JTr[idx])])
         X[idx] += step
         converged = bool(np.max(np.abs(step)) < tol)
+    return JTJ, res, jac
+
+
+def triangulate(cameras: list[Camera], uv, *, pixel_sigma: float = 0.1, uv_cov=None, min_views: int = 2,
+                iterations: int = 10, tol: float = 1e-10) -> Triangulation:
+    """Triangulate pixels uv (P, C, 2) seen by ``cameras`` (NaN = not seen).
+
+    Parameters
+    ----------
+    cameras : list of Camera
+        The C cameras.
+    uv : array_like (P, C, 2)
+        Observed pixels (NaN = not seen).
+    pixel_sigma : float
+        Isotropic centroid standard deviation [px] used when ``uv_cov`` is not given.
+    uv_cov : array_like (P, C, 2, 2), optional
+        Covariance of each observed pixel [px²]; the fit then minimises Σ rᵀ W r with W = uv_cov⁻¹ and the
+        point covariance is (Σ Jᵀ W J)⁻¹.
+    min_views : int
+        Views needed for a point (≥ 2).
+
+    Returns
+    -------
+    Triangulation
+    """
+    uv = np.asarray(uv, float)
+    if uv.ndim != 3 or uv.shape[1] != len(cameras) or uv.shape[2] != 2:
+        raise ValueError(f"uv must have shape (points, {len(cameras)}, 2), got {uv.shape}")
+    P_, C = uv.shape[:2]
+    seen = np.all(np.isfinite(uv), axis=-1)
+    W = _weights(uv_cov, seen, pixel_sigma)
+    n_views = seen.sum(axis=1)
+    X = triangulate_linear(cameras, uv)
+    active = (n_views >= max(2, min_views)) & np.all(np.isfinite(X), axis=1)
+    JTJ, res, jac = _gauss_newton(cameras, uv, W, X, active, seen, iterations, tol)
     rms = np.full(P_, np.nan)
     chi2 = np.full(P_, np.nan)
     with np.errstate(invalid="ignore"):
