@@ -10,7 +10,6 @@ own 99.9 % covariance ellipsoid, the 95th percentile of the 3-D error, and the f
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np

@@ -8,9 +8,9 @@ from scipy.stats import chi2
 
 from bayes_disc.video.camera import look_at
 from bayes_disc.video.consistency import CheckConfig, check_points
-from bayes_disc.video.detection import CROWDED, MERGED, DetectionConfig, detect_full
+from bayes_disc.video.detection import MERGED, DetectionConfig, detect_full
 from bayes_disc.video.psf import spots
-from bayes_disc.video.refine import CameraNoise, Views, camera_noise, drop_overlaps, refine, shot_noise
+from bayes_disc.video.refine import Views, drop_overlaps, refine, shot_noise
 from bayes_disc.video.testfootage import marker_positions, standard_test_spec
 from bayes_disc.video.triangulation import triangulate
 

@@ -268,9 +268,9 @@ def _spread(var: np.ndarray, dx: np.ndarray, dy: np.ndarray, tot: float) -> np.n
     return np.array([[float(var.sum(axis=0) @ (dx * dx)), xy], [xy, float(var.sum(axis=1) @ (dy * dy))]]) / (tot * tot)
 
 
-def _split(S, b, own, labels_w, window, origin, tot, peaks_found):
-    """Split one component with two or more intensity peaks by a joint fit; None when that fails."""
-    wx0, wy0 = window[0], window[1]
+def _split(S, b, own, labels_w, origin, tot, peaks_found):
+    """Split one component with two or more intensity peaks (window coordinates) by a joint fit of as many
+    spots on its window S (top-left pixel ``origin`` in the frame); None when that fails."""
     valid = ~((labels_w != 0) & ~own)
     u0 = np.array([p[0] + origin[0] for p in peaks_found], float)
     v0 = np.array([p[1] + origin[1] for p in peaks_found], float)
@@ -316,7 +316,7 @@ def _measure(signal: np.ndarray, raw: np.ndarray, labels: np.ndarray, stats: np.
         if len(found) >= 2:
             fit = None
             if cfg.deblend and len(found) <= 4 and not flags & EDGE:
-                fit = _split(S, b, own, labels[wy0:wy1, wx0:wx1], window, (wx0 + x_off, wy0 + y_off), tot, found)
+                fit = _split(S, b, own, labels[wy0:wy1, wx0:wx1], (wx0 + x_off, wy0 + y_off), tot, found)
             if fit is not None:  # two or more markers in one component, split by a joint fit
                 for j in range(len(found)):
                     rows.append(((fit[0][j], fit[1][j]), area, float(fit[3][j]), peak_raw, 1.0, flags | CROWDED,
