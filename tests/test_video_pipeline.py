@@ -151,6 +151,12 @@ def test_track_config_errors(tmp_path, capsys):
          r"key 'markers': the layout is \(nearly\) symmetric"),
         ({"triangulation": {"pixel_sigma": "big"}}, r"key 'triangulation\.pixel_sigma'"),
         ({"calibration": {"format": "opencv-xml", "file": "cameras.yaml"}}, r"key 'calibration\.format'"),
+        ({"timestamps": {"convention": "exposure-start"}}, r"key 'timestamps\.exposure_s': is required"),
+        ({"timestamps": {"convention": "end"}}, r"key 'timestamps\.convention'"),
+        ({"sync": {"max_offset": 0}}, r"key 'sync\.max_offset'"),
+        ({"checks": {"action": "ignore"}}, r"key 'checks\.action'"),
+        ({"cameras": {"A": {"source": "A/x_%06d.png", "frame_offset": "late"}, "B": {"source": "A/x_%06d.png"}}},
+         r"key 'cameras\.A\.frame_offset'"),
     ]
     for change, message in cases:
         path = small_track_config(tmp_path, good, **change)
@@ -168,6 +174,30 @@ def test_track_config_errors(tmp_path, capsys):
         parse_track_config(tmp_path / "absent.yaml")
 
 
+def test_frame_offsets_timestamps_and_checks_in_the_track_config(tmp_path):
+    """A camera without ``frame_offset`` has it estimated (None), a fraction is a sub-frame delay; the
+    timestamp convention sets the time from a frame's stamp to the middle of its exposure."""
+    cams = [look_at(n, [2, y, 4], [2, 0, 1.3], 560, (640, 512)) for n, y in (("A", -5), ("B", 5))]
+    write_camera_yaml(tmp_path / "cameras.yaml", cams)
+    (tmp_path / "A").mkdir()
+    (tmp_path / "A" / "x_000001.png").write_bytes(b"")
+    sources = {"A": {"source": "A/x_%06d.png"}, "B": {"source": "A/x_%06d.png", "frame_offset": 2.25}}
+    cfg = parse_track_config(small_track_config(tmp_path, sources))
+    assert [i.frame_offset for i in cfg.inputs] == [None, 2.25]
+    assert cfg.timestamps == "mid-exposure" and cfg.time_shift == 0.0
+    assert cfg.sync.max_offset == 10 and cfg.sync.tau_px is None and cfg.sync.subframe
+    assert cfg.checks.action == "inflate" and cfg.pixel_sigma is None
+    assert cfg.detection.merge_flux_ratio is None and cfg.detection.gain is None
+    cfg = parse_track_config(small_track_config(
+        tmp_path, sources, timestamps={"convention": "exposure-start", "exposure_s": 0.002},
+        sync={"max_offset": 4, "tau_px": 2.5, "subframe": False}, checks={"action": "drop", "layout_sigma_m": 0.0005},
+        detection={"gain": 4.0, "merge_flux_ratio": 1.6}))
+    assert cfg.time_shift == pytest.approx(0.001)
+    assert (cfg.sync.max_offset, cfg.sync.tau_px, cfg.sync.subframe) == (4, 2.5, False)
+    assert cfg.checks.action == "drop" and cfg.checks.layout_sigma_m == 0.0005
+    assert cfg.detection.gain == 4.0 and cfg.detection.merge_flux_ratio == 1.6
+
+
 def test_register_adds_subcommands():
     parser = argparse.ArgumentParser(prog="bayes-disc")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -176,6 +206,8 @@ def test_register_adds_subcommands():
     assert a.config == "T.yaml" and a.output == "x.csv" and callable(a.func)
     b = parser.parse_args(["render", "R.yaml"])
     assert b.config == "R.yaml" and callable(b.func) and b.func is not a.func
+    c = parser.parse_args(["test-footage", "out", "--size", "small", "--frame-offsets", "0", "1", "3"])
+    assert c.folder == "out" and c.frame_offsets == [0, 1, 3] and c.size == "small" and callable(c.func)
 
 
 def test_control_point_calibration_in_track_config(tmp_path, rng):

@@ -3,6 +3,9 @@
 ``bayes-disc track TRACK.yaml [-o OUT.csv] [--quiet]`` — footage or imported points → marker
 file (docs/data-formats.md).
 ``bayes-disc render RENDER.yaml [-o FOLDER] [--quiet]`` — synthetic footage, camera file and truth.
+``bayes-disc test-footage FOLDER [--size small|full] [--seed N] ...`` — footage of a known flight made by
+an imaging model independent of ``render`` (DLT cameras, varying blobs, smear, occlusions, offsets),
+with a plain ``track.yaml`` and the truth, for checking a tracking setup.
 
 Bad input raises :class:`~.errors.VideoInputError`; the main CLI prints it and exits with status 2.
 ``python -m bayes_disc.video ...`` runs the same subcommands on their own.
@@ -40,6 +43,20 @@ def _render(args) -> int:
     return 0
 
 
+def _test_footage(args) -> int:
+    from .testfootage import standard_test_spec, write_test_footage
+
+    spec = standard_test_spec(args.size, seed=args.seed, frame_offsets=tuple(args.frame_offsets),
+                              subframes=tuple(args.subframes), timestamps=args.timestamps)
+    info = write_test_footage(spec, args.folder, progress=not args.quiet)
+    if not args.quiet:
+        offs = ", ".join(f"{n} {c['frame_offset']}{c['subframe']:+.2f}" for n, c in info["cameras"].items())
+        print(f"wrote test footage of flight {info['flight']} ({info['n_frames']} frames, frame offsets {offs}) "
+              f"into {args.folder}: run bayes-disc track {args.folder}/track.yaml and compare with truth.csv",
+              file=sys.stderr)
+    return 0
+
+
 def register(subparsers) -> None:
     """Add the ``track`` and ``render`` subcommands to an argparse subparsers object."""
     p = subparsers.add_parser("track", help="footage (or DLTdv/Argus points) + calibration → marker CSV "
@@ -57,6 +74,25 @@ def register(subparsers) -> None:
     r.add_argument("-o", "--output", help="output folder (default: the config's output.folder)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     r.set_defaults(func=_render)
+    t = subparsers.add_parser("test-footage", help="footage of a known flight from an independent imaging model, "
+                                                   "with a plain track.yaml and the truth",
+                              description="Write three cameras' image sequences of a known flight (DLT cameras, "
+                                          "blob widths and brightness varying between frames and markers, exposure "
+                                          "smear, a bright patch, occluding poles, read and shot noise, a camera "
+                                          "starting late), their DLT calibration, a plain track.yaml and truth.csv / "
+                                          "truth_2d.csv / truth.json (see bayes_disc/video/README.md).")
+    t.add_argument("folder", help="output folder")
+    t.add_argument("--size", choices=("small", "full"), default="full",
+                   help="full: 1280×1024 px, 151 frames; small: 640×512 px, 48 frames (default: full)")
+    t.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+    t.add_argument("--frame-offsets", type=int, nargs=3, default=[0, 0, 2], metavar="K",
+                   help="integer frame offset of each of the three cameras (default 0 0 2)")
+    t.add_argument("--subframes", type=float, nargs=3, default=[0.0, 0.0, 0.0], metavar="D",
+                   help="sub-frame delay of each camera in frames, |D| ≤ 0.5 (default 0 0 0)")
+    t.add_argument("--timestamps", choices=("mid-exposure", "exposure-start"), default="mid-exposure",
+                   help="what a frame's time stamp marks (default mid-exposure)")
+    t.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    t.set_defaults(func=_test_footage)
 
 
 def main(argv=None) -> int:

@@ -10,7 +10,14 @@ For a grey frame I (DN; uint8, uint16 or float) and an optional background image
 
        w = max(I − B − b − k σ_b, 0),   (u, v) = Σ w·(x, y) / Σ w
 
-   with k = ``noise_floor_sigma`` (pixel centres at integer coordinates, OpenCV convention);
+   with k = ``noise_floor_sigma`` (pixel centres at integer coordinates, OpenCV convention). The
+   centroid's covariance propagates the pixel noise through these weights,
+   C = Σ_(w>0) (x − c)(x − c)ᵀ var / (Σ w)², var = σ_b² + (DN step)²/12 + (I − B − b)/g: a wide, faint
+   or smeared blob has a larger one than a small bright one. The shot-noise term needs the gain g
+   (e⁻/DN): given as ``gain``, it is included; otherwise its part per unit 1/g is kept apart
+   (``Blobs.cov_shot``) and each isolated blob reports how its pixels scatter about a fitted Gaussian
+   (``Blobs.shot_stats``): pooled over a camera's blobs, var(r) = σ_b² + m/g gives 1/g (a photon
+   transfer measured on the markers themselves; the tracker does this per camera);
 3. flags (bit mask):
 
    - ``SATURATED``: a pixel at or above the saturation level (the centroid stays usable: clipping is
@@ -19,13 +26,16 @@ For a grey frame I (DN; uint8, uint16 or float) and an optional background image
      (motion blur; usable);
    - ``CROWDED``: another blob reached into the window and was masked. Its tail can still bias the
      centroid by up to a few tenths of a pixel, so with ``deblend`` the centroids of a group of
-     crowded blobs are refined by a joint least-squares fit of pixel-integrated Gaussians (:mod:`.psf`,
-     compiled in :mod:`._kernels`). A single component with two or more separate intensity peaks (two
+     crowded blobs are refined by a joint least-squares fit of pixel-integrated Gaussians
+     (:mod:`.deblend`), whose covariance (plus the square of a quarter of the correction) replaces the
+     centroid's. A single component with two or more separate intensity peaks (two
      markers touching in the image) is split by the same fit into crowded blobs;
-   - ``MERGED``: a multi-peak component that could not be split, or a blob whose flux exceeds
-     ``merge_flux_ratio`` × the median flux of the frame's other blobs (or area > ``merge_area_ratio``
-     × their median, or × ``expected_area``): two markers imaged as one, a centroid of neither.
-     Not usable;
+   - ``MERGED``: a multi-peak component that could not be split, or (only when ``expected_area`` is
+     given) a blob larger than ``merge_area_ratio`` (default 2) × that area; optionally (when
+     ``merge_flux_ratio`` or ``merge_area_ratio`` is set) a blob whose flux or area exceeds that ratio ×
+     the median of the frame's other blobs. Not usable. The relative tests are off by default: a marker
+     seen face-on is easily twice as bright as its neighbours, and two markers in one blob are found
+     better from the geometry, once they are labelled (:mod:`.consistency`);
    - ``EDGE``: the blob touches the frame border; its centroid is biased. Not usable.
 
 Two modes. Full frame: a coarse pass marks ``tile``×``tile`` tiles that hold any mask pixel and the
@@ -40,7 +50,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ._kernels import fit_spots_lm
+from .deblend import deblend_groups, fit_spots, min_separation, peaks, spot_jacobian
 
 SATURATED = 1
 ELONGATED = 2
@@ -52,7 +62,14 @@ FLAG_NAMES = {SATURATED: "saturated", ELONGATED: "elongated", MERGED: "merged", 
 
 @dataclass(frozen=True)
 class DetectionConfig:
-    """Detection settings (pixel units; intensities in DN of the frame)."""
+    """Detection settings (pixel units; intensities in DN of the frame).
+
+    merge_flux_ratio, merge_area_ratio: when set, a blob brighter (larger) than this × the median of the
+    frame's other blobs is flagged ``MERGED``; off by default, because markers whose brightness changes
+    with the view angle differ by ×2 or more while each is one marker (the tracker instead drops a view in
+    which two labelled markers fall on one blob, see :mod:`.consistency`). gain: e⁻ per DN, for the shot
+    noise of a centroid's covariance (None: only the background noise measured around the blob).
+    """
 
     threshold: float = 30.0
     min_area: int = 2
@@ -62,12 +79,13 @@ class DetectionConfig:
     noise_floor_sigma: float = 2.0
     saturation: float | None = None  # default: the dtype's maximum (255 for uint8)
     max_elongation: float = 2.0
-    merge_flux_ratio: float = 1.6
-    merge_area_ratio: float = 2.0
+    merge_flux_ratio: float | None = None
+    merge_area_ratio: float | None = None
     expected_area: float | None = None
     roi_radius: int = 16
     tile: int = 8
     deblend: bool = True
+    gain: float | None = None
 
     def __post_init__(self):
         if self.threshold <= 0:
@@ -76,12 +94,23 @@ class DetectionConfig:
             raise ValueError("detection: need 1 ≤ min_area ≤ max_area")
         if self.pad < 1 or self.roi_radius < 2 or self.tile < 2:
             raise ValueError("detection: pad ≥ 1, roi_radius ≥ 2 and tile ≥ 2 are required")
+        if self.gain is not None and self.gain <= 0:
+            raise ValueError("detection.gain must be positive")
+
+
+_FIELDS = ("uv", "area", "flux", "peak", "elongation", "flags", "cov", "width", "cov_shot", "shot_stats")
 
 
 @dataclass
 class Blobs:
     """Blobs of one frame: uv (n, 2) centroids [px]; area (n,) [px]; flux (n,) background-subtracted
-    sum [DN]; peak (n,) brightest raw pixel [DN]; elongation (n,) ≥ 1; flags (n,) bit mask."""
+    sum [DN]; peak (n,) brightest raw pixel [DN]; elongation (n,) ≥ 1; flags (n,) bit mask; cov (n, 2, 2)
+    covariance of the centroid [px²] from the noise around the blob (or from the deblending fit); width
+    (n,) RMS width along the blob's major axis [px]; cov_shot (n, 2, 2) the shot-noise part of the
+    centroid covariance per unit 1/gain [px² DN] (zero when the gain is given: then it is in ``cov``);
+    shot_stats (n, 2): (Σ m (r² − σ_b² − 1/12), Σ m²) over the pixels of a Gaussian fitted to an isolated
+    blob (m: the model [DN], r: the residual [DN]) — summed over many blobs, their ratio estimates 1/gain
+    [DN per e⁻] (zeros when not measured)."""
 
     uv: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
     area: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
@@ -89,6 +118,10 @@ class Blobs:
     peak: np.ndarray = field(default_factory=lambda: np.zeros(0))
     elongation: np.ndarray = field(default_factory=lambda: np.zeros(0))
     flags: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
+    width: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    cov_shot: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
+    shot_stats: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
 
     def __len__(self) -> int:
         return len(self.uv)
@@ -99,15 +132,18 @@ class Blobs:
         return (self.flags & (MERGED | EDGE)) == 0
 
     def subset(self, keep) -> "Blobs":
-        return Blobs(self.uv[keep], self.area[keep], self.flux[keep], self.peak[keep], self.elongation[keep],
-                     self.flags[keep])
+        return Blobs(*(getattr(self, f)[keep] for f in _FIELDS))
 
     @staticmethod
     def concat(parts: list) -> "Blobs":
         if not parts:
             return Blobs()
-        return Blobs(*(np.concatenate([getattr(p, f) for p in parts]) for f in
-                       ("uv", "area", "flux", "peak", "elongation", "flags")))
+        return Blobs(*(np.concatenate([getattr(p, f) for p in parts]) for f in _FIELDS))
+
+    def reasons(self) -> dict:
+        """Counts of the blobs that are not usable, by reason (``merged``, ``edge``)."""
+        return {"merged": int(np.sum(self.flags & MERGED > 0)), "edge": int(np.sum((self.flags & EDGE > 0)
+                                                                                  & (self.flags & MERGED == 0)))}
 
 
 def _as_gray(frame) -> np.ndarray:
@@ -127,6 +163,11 @@ def _saturation_level(frame: np.ndarray, cfg: DetectionConfig) -> float:
     if np.issubdtype(frame.dtype, np.integer):
         return float(np.iinfo(frame.dtype).max)
     return np.inf
+
+
+def _quantum(frame: np.ndarray) -> float:
+    """The DN step of a frame: 1 for integer frames, 0 for float frames."""
+    return 1.0 if np.issubdtype(frame.dtype, np.integer) else 0.0
 
 
 def _signal(region: np.ndarray, background: np.ndarray | None) -> np.ndarray:
@@ -149,194 +190,207 @@ def _kernel(r: int) -> np.ndarray:
     return _KERNELS[r]
 
 
+def _window(signal, labels, k: int, box, pad: int, dd: int):
+    """Centroid window of component k (bounding box ``box`` = x0, y0, w, h in the region): the window
+    (x0, y0, x1, y1), its own-pixel mask, the mask of other components grown by ``dd`` px, and the labels
+    of those neighbours."""
+    H, W = signal.shape
+    x0, y0, w, h = box
+    wx0, wy0 = max(x0 - pad, 0), max(y0 - pad, 0)
+    wx1, wy1 = min(x0 + w + pad, W), min(y0 + h + pad, H)
+    own = labels[wy0:wy1, wx0:wx1] == k
+    # other components in or near the window (up to dd px outside), grown by dd
+    ex0, ey0, ex1, ey1 = max(wx0 - dd, 0), max(wy0 - dd, 0), min(wx1 + dd, W), min(wy1 + dd, H)
+    Lb = labels[ey0:ey1, ex0:ex1]
+    ob = (Lb != 0) & (Lb != k)
+    neighbours = set()
+    others = np.zeros(own.shape, bool)
+    if ob.any():
+        grown = cv2.dilate(ob.view(np.uint8), _kernel(dd)).astype(bool) if dd > 0 else ob
+        others = grown[wy0 - ey0:wy1 - ey0, wx0 - ex0:wx1 - ex0] & ~own
+        if others.any():
+            neighbours = set(np.unique(Lb[ob]).tolist())
+    return (wx0, wy0, wx1, wy1), own, others, neighbours
+
+
+def _moments(S: np.ndarray, own, others, window, cfg: DetectionConfig, quantum: float):
+    """Weighted centroid of a window (see the module docstring) and its covariance.
+
+    Returns None when no pixel has weight, else (cx, cy, total weight, elongation, major-axis RMS width
+    [px], background b, RMS width σ̄ [px], covariance (2, 2) [px²], shot-noise covariance per unit 1/gain
+    (2, 2) [px² DN]). The covariance propagates the noise of the weighted pixels: C = Σ_(w>0) (x − c)(x − c)ᵀ
+    var / W², var = σ_b² + quantum²/12 (+ signal/gain with a gain), σ_b the noise of the window's border
+    ring (1.4826 × MAD); without a gain the shot-noise part Σ_(w>0) (x − c)(x − c)ᵀ signal / W² is returned
+    apart, for the gain to be measured later (:mod:`.refine`)."""
+    wx0, wy0, wx1, wy1 = window
+    ring = np.zeros(S.shape, bool)
+    ring[0, :] = ring[-1, :] = ring[:, 0] = ring[:, -1] = True
+    ring &= ~own & ~others
+    if ring.sum() >= 4:
+        vals = S[ring]
+        b = _median(vals)
+        sig = 1.4826 * _median(np.abs(vals - b))
+    else:
+        b, sig = 0.0, 0.0
+    wgt = S - (b + cfg.noise_floor_sigma * sig)
+    wgt[others] = 0
+    np.maximum(wgt, 0, out=wgt)
+    tot = float(wgt.sum())
+    if tot <= 0:
+        return None
+    ys = np.arange(wy0, wy1, dtype=np.float64)
+    xs = np.arange(wx0, wx1, dtype=np.float64)
+    wx_ = wgt.sum(axis=0, dtype=np.float64)
+    wy_ = wgt.sum(axis=1, dtype=np.float64)
+    cx = float(wx_ @ xs) / tot
+    cy = float(wy_ @ ys) / tot
+    dx, dy = xs - cx, ys - cy
+    sxx = float(wx_ @ (dx * dx)) / tot
+    syy = float(wy_ @ (dy * dy)) / tot
+    sxy = float(dy @ wgt.astype(np.float64) @ dx) / tot
+    tr, det = sxx + syy, sxx * syy - sxy * sxy
+    disc = max(tr * tr / 4 - det, 0.0) ** 0.5
+    l1, l2 = tr / 2 + disc, max(tr / 2 - disc, 1e-12)
+    on = (wgt > 0).astype(np.float64)
+    var = on * (sig * sig + quantum * quantum / 12.0)
+    shot = on * np.maximum(S - b, 0)
+    cov = _spread(var, dx, dy, tot)
+    cov_shot = _spread(shot, dx, dy, tot)
+    if cfg.gain is not None:
+        cov, cov_shot = cov + cov_shot / cfg.gain, np.zeros((2, 2))
+    return (cx, cy, tot, float(np.sqrt(l1 / l2)), float(np.sqrt(l1)), b, float(np.sqrt(max(tr / 2 - 1 / 12, 0.09))),
+            cov, cov_shot)
+
+
+def _spread(var: np.ndarray, dx: np.ndarray, dy: np.ndarray, tot: float) -> np.ndarray:
+    """Σ var (x − c)(x − c)ᵀ / tot² over a window (rows y, columns x) [px² × units of var]."""
+    xy = float(dy @ var @ dx)
+    return np.array([[float(var.sum(axis=0) @ (dx * dx)), xy], [xy, float(var.sum(axis=1) @ (dy * dy))]]) / (tot * tot)
+
+
+def _split(S, b, own, labels_w, origin, tot, peaks_found):
+    """Split one component with two or more intensity peaks (window coordinates) by a joint fit of as many
+    spots on its window S (top-left pixel ``origin`` in the frame); None when that fails."""
+    valid = ~((labels_w != 0) & ~own)
+    u0 = np.array([p[0] + origin[0] for p in peaks_found], float)
+    v0 = np.array([p[1] + origin[1] for p in peaks_found], float)
+    n = len(peaks_found)
+    fit = fit_spots(S.astype(np.float64) - b, valid, origin, u0, v0, np.full(n, 1.0), np.full(n, max(tot, 1.0) / n), 2.0)
+    if fit is None or min_separation(fit[0], fit[1]) < 1.0:
+        return None
+    return fit
+
+
 def _measure(signal: np.ndarray, raw: np.ndarray, labels: np.ndarray, stats: np.ndarray, x_off: int, y_off: int,
-             frame_shape, cfg: DetectionConfig, sat: float, region_is_frame_edge) -> tuple[Blobs, list]:
+             frame_shape, cfg: DetectionConfig, sat: float, region_is_frame_edge, quantum: float = 1.0) -> tuple[Blobs, list]:
     """Centroids of the components of ``labels`` inside one region (offset x_off, y_off in the frame).
 
     Returns the blobs and, for each, whether it touches the region border where the region is not the
-    frame border (then the caller must grow the region).
-
-    Long: one pass over the components whose split, edge and saturation decisions share each blob's window
-    and background."""
+    frame border (then the caller must grow the region). ``quantum``: the frame's DN step (0 for float
+    frames), for the quantisation noise of the covariance."""
     H, W = signal.shape
     fh, fw = frame_shape
-    out = {k: [] for k in ("uv", "area", "flux", "peak", "el", "flags", "cut")}
-    info = []  # per blob: label (−1 after a split), window, background, σ estimate, neighbour labels
-    pad, dd = cfg.pad, cfg.mask_dilation
-
-    def emit(uv, area, flux, peak, el, flags, cut, inf):
-        for key, val in zip(("uv", "area", "flux", "peak", "el", "flags", "cut"), (uv, area, flux, peak, el, flags, cut)):
-            out[key].append(val)
-        info.append(inf)
-
+    rows, info, cut = [], [], []  # info per blob: label (−1 after a split), window, background, σ, neighbours
     for k in range(1, len(stats)):
         x0, y0, w, h, area = (int(v) for v in stats[k])
         if area < cfg.min_area or area > cfg.max_area:
             continue
         touches = (x0 == 0 and not region_is_frame_edge[0]) or (y0 == 0 and not region_is_frame_edge[1]) or \
                   (x0 + w == W and not region_is_frame_edge[2]) or (y0 + h == H and not region_is_frame_edge[3])
-        wx0, wy0 = max(x0 - pad, 0), max(y0 - pad, 0)
-        wx1, wy1 = min(x0 + w + pad, W), min(y0 + h + pad, H)
+        window, own, others, neighbours = _window(signal, labels, k, (x0, y0, w, h), cfg.pad, cfg.mask_dilation)
+        wx0, wy0, wx1, wy1 = window
         S = signal[wy0:wy1, wx0:wx1]
-        L = labels[wy0:wy1, wx0:wx1]
-        own = L == k
-        # other components in or near the window (up to mask_dilation px outside), grown by mask_dilation
-        ex0, ey0, ex1, ey1 = max(wx0 - dd, 0), max(wy0 - dd, 0), min(wx1 + dd, W), min(wy1 + dd, H)
-        Lb = labels[ey0:ey1, ex0:ex1]
-        ob = (Lb != 0) & (Lb != k)
-        neighbours = set()
-        others = np.zeros(own.shape, bool)
-        if ob.any():
-            grown = cv2.dilate(ob.view(np.uint8), _kernel(dd)).astype(bool) if dd > 0 else ob
-            others = grown[wy0 - ey0:wy1 - ey0, wx0 - ex0:wx1 - ex0] & ~own
-            if others.any():
-                neighbours = set(np.unique(Lb[ob]).tolist())
-        ring = np.zeros(S.shape, bool)
-        ring[0, :] = ring[-1, :] = ring[:, 0] = ring[:, -1] = True
-        ring &= ~own & ~others
-        if ring.sum() >= 4:
-            vals = S[ring]
-            b = _median(vals)
-            sig = 1.4826 * _median(np.abs(vals - b))
-        else:
-            b, sig = 0.0, 0.0
-        wgt = S - (b + cfg.noise_floor_sigma * sig)
-        wgt[others] = 0
-        np.maximum(wgt, 0, out=wgt)
-        tot = float(wgt.sum())
-        if tot <= 0:
+        mom = _moments(S, own, others, window, cfg, quantum)
+        if mom is None:
             continue
-        ys = np.arange(wy0, wy1, dtype=np.float64)
-        xs = np.arange(wx0, wx1, dtype=np.float64)
-        wx_ = wgt.sum(axis=0, dtype=np.float64)
-        wy_ = wgt.sum(axis=1, dtype=np.float64)
-        cx = float(wx_ @ xs) / tot
-        cy = float(wy_ @ ys) / tot
-        dx, dy = xs - cx, ys - cy
-        sxx = float(wx_ @ (dx * dx)) / tot
-        syy = float(wy_ @ (dy * dy)) / tot
-        sxy = float(dy @ wgt.astype(np.float64) @ dx) / tot
-        tr, det = sxx + syy, sxx * syy - sxy * sxy
-        disc = max(tr * tr / 4 - det, 0.0) ** 0.5
-        l1, l2 = tr / 2 + disc, max(tr / 2 - disc, 1e-12)
-        elong = float(np.sqrt(l1 / l2))
+        cx, cy, tot, elong, width, b, sbar, cov, cov_shot = mom
         peak_raw = float(raw[wy0:wy1, wx0:wx1][own].max())
-        flags = 0
-        if peak_raw >= sat:
-            flags |= SATURATED
+        flags = SATURATED if peak_raw >= sat else 0
         gx0, gy0 = x0 + x_off, y0 + y_off
         if gx0 == 0 or gy0 == 0 or gx0 + w == fw or gy0 + h == fh:
             flags |= EDGE
         if others.any():
             flags |= CROWDED
-        window = (wx0, wy0, wx1, wy1)
         # two markers ≥ 3 px apart make a blob elongated (ratio ≥ 1.25 for σ ≤ 2 px): only then look for peaks
-        peaks = _peaks(S - b, own) if elong > 1.15 else [None]
-        if len(peaks) >= 2:
-            if cfg.deblend and len(peaks) <= 4 and not flags & EDGE:
-                # two or more markers in one component: split it by a joint fit
-                valid = ~((L != 0) & ~own)
-                u0 = np.array([p[0] + wx0 + x_off for p in peaks], float)
-                v0 = np.array([p[1] + wy0 + y_off for p in peaks], float)
-                fit = _fit_spots(S.astype(np.float64) - b, valid, (wx0 + x_off, wy0 + y_off), u0, v0,
-                                 np.full(len(peaks), 1.0), np.full(len(peaks), max(tot, 1.0) / len(peaks)), 2.0)
-                if fit is not None and _min_separation(fit[0], fit[1]) >= 1.0:
-                    for j in range(len(peaks)):
-                        emit((fit[0][j], fit[1][j]), area, float(fit[3][j]), peak_raw, 1.0, flags | CROWDED, touches,
-                             (-1, window, b, float(fit[2][j]), set()))
-                    continue
+        found = peaks(S - b, own) if elong > 1.15 else [None]
+        if len(found) >= 2:
+            fit = None
+            if cfg.deblend and len(found) <= 4 and not flags & EDGE:
+                fit = _split(S, b, own, labels[wy0:wy1, wx0:wx1], (wx0 + x_off, wy0 + y_off), tot, found)
+            if fit is not None:  # two or more markers in one component, split by a joint fit
+                for j in range(len(found)):
+                    rows.append(((fit[0][j], fit[1][j]), area, float(fit[3][j]), peak_raw, 1.0, flags | CROWDED,
+                                 fit[4][j], float(fit[2][j]), cov_shot / len(found), np.zeros(2)))
+                    info.append((-1, window, b, float(fit[2][j]), set()))
+                    cut.append(touches)
+                continue
             flags |= MERGED
         if elong > cfg.max_elongation:
             flags |= ELONGATED
-        if cfg.expected_area is not None and area > cfg.merge_area_ratio * cfg.expected_area:
+        if cfg.expected_area is not None and area > (cfg.merge_area_ratio or 2.0) * cfg.expected_area:
             flags |= MERGED
-        emit((cx + x_off, cy + y_off), area, tot, peak_raw, elong, flags, touches,
-             (k, window, b, float(np.sqrt(max(tr / 2 - 1 / 12, 0.09))), neighbours))
-    blobs = Blobs(np.array(out["uv"], float).reshape(-1, 2), np.array(out["area"], int), np.array(out["flux"], float),
-                  np.array(out["peak"], float), np.array(out["el"], float), np.array(out["flags"], int))
+        stats_ = np.zeros(2)
+        if cfg.gain is None and flags == 0:
+            stats_ = _shot_stats(S, b, own, others, window, (x_off, y_off), (cx, cy, sbar, tot), quantum)
+        rows.append(((cx + x_off, cy + y_off), area, tot, peak_raw, elong, flags, cov, width, cov_shot, stats_))
+        info.append((k, window, b, sbar, neighbours))
+        cut.append(touches)
+    blobs = _blobs_from_rows(rows)
     if cfg.deblend and any(i[4] for i in info):
-        _deblend(signal, labels, blobs, info, x_off, y_off, cfg)
-    return blobs, out["cut"]
+        deblend_groups(signal, labels, blobs.uv, blobs.cov, info, x_off, y_off)
+    return blobs, cut
 
 
-def _min_separation(u, v) -> float:
-    d = np.hypot(u[:, None] - u[None, :], v[:, None] - v[None, :])
-    d[np.diag_indices(len(u))] = np.inf
-    return float(d.min())
+def _blobs_from_rows(rows: list) -> Blobs:
+    if not rows:
+        return Blobs()
+    uv, area, flux, peak, el, flags, cov, width, cov_shot, shot = zip(*rows)
+    return Blobs(np.array(uv, float).reshape(-1, 2), np.array(area, int), np.array(flux, float), np.array(peak, float),
+                 np.array(el, float), np.array(flags, int), np.array(cov, float).reshape(-1, 2, 2),
+                 np.array(width, float), np.array(cov_shot, float).reshape(-1, 2, 2), np.array(shot, float).reshape(-1, 2))
 
 
-def _fit_spots(data, valid, origin, u0, v0, s0, f0, max_shift: float):
-    """Least-squares fit of pixel-integrated Gaussians (centre, σ, flux each) to ``data`` on ``valid``
-    pixels of a window whose top-left pixel is ``origin`` (frame coordinates). Returns (u, v, σ, F) or
-    None when the fit fails, a centre moves more than ``max_shift`` px, or σ leaves [0.3, 10] px."""
-    n = len(u0)
-    if valid.sum() <= 4 * n:
-        return None
-    p0 = np.concatenate([u0, v0, np.log(s0), np.log(f0)]).astype(np.float64)
-    try:
-        p, ok = fit_spots_lm(np.ascontiguousarray(data, np.float64), np.ascontiguousarray(valid), int(origin[0]),
-                             int(origin[1]), p0, 60)
-    except Exception:  # singular normal equations etc.
-        return None
-    u, v, sg, fl = p[:n], p[n:2 * n], np.exp(p[2 * n:3 * n]), np.exp(p[3 * n:])
-    if not (ok and np.all(np.isfinite(p)) and np.all(np.hypot(u - u0, v - v0) < max_shift)
-            and np.all((sg > 0.3) & (sg < 10))):
-        return None
-    return u, v, sg, fl
-
-
-def _deblend(signal, labels, blobs: Blobs, info: list, x_off: int, y_off: int, cfg: DetectionConfig) -> None:
-    """Refine the centroids of crowded blobs by a joint least-squares fit of pixel-integrated Gaussians
-    (centre, σ, flux each) to their union window; other components there get zero weight. The fit is
-    accepted when it converges with every centre within 1.5 px of its centroid and σ in [0.3, 10] px."""
-    label_to_idx = {inf[0]: i for i, inf in enumerate(info) if inf[0] > 0}
-    parent = list(range(len(info)))
-
-    def find(i):
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    for i, inf in enumerate(info):
-        for lab in inf[4]:
-            j = label_to_idx.get(lab)
-            if j is not None:
-                parent[find(i)] = find(j)
-    groups: dict = {}
-    for i in range(len(info)):
-        if info[i][0] > 0:
-            groups.setdefault(find(i), []).append(i)
-    for members in groups.values():
-        if len(members) < 2 or len(members) > 6:
-            continue
-        x0 = min(info[i][1][0] for i in members)
-        y0 = min(info[i][1][1] for i in members)
-        x1 = max(info[i][1][2] for i in members)
-        y1 = max(info[i][1][3] for i in members)
-        data = signal[y0:y1, x0:x1].astype(np.float64) - float(np.mean([info[i][2] for i in members]))
-        L = labels[y0:y1, x0:x1]
-        valid = (L == 0) | np.isin(L, [info[i][0] for i in members])
-        u0, v0 = blobs.uv[members, 0].copy(), blobs.uv[members, 1].copy()
-        s0 = np.array([info[i][3] for i in members])
-        f0 = np.array([max(float(data[L == info[i][0]].sum()), 1.0) for i in members])
-        fit = _fit_spots(data, valid, (x0 + x_off, y0 + y_off), u0, v0, s0, f0, 1.5)
-        if fit is None:
-            continue
-        blobs.uv[members, 0] = fit[0]
-        blobs.uv[members, 1] = fit[1]
+def _shot_stats(S, b: float, own, others, window, offset, start, quantum: float) -> np.ndarray:
+    """(Σ m (r² − (1 − h)(σ_b² + quantum²/12)), Σ (1 − h) m²) of a round Gaussian fitted to an isolated blob's
+    window (m: model, r: residual [DN], h: the fit's leverage of each pixel, which takes that share of the
+    pixel's noise out of its residual); zeros when the fit fails. start: (cx, cy, σ, flux), region pixels.
+    Summed over many blobs, the ratio is 1/gain, since E[r²] = (1 − h)(σ_b² + m/g)."""
+    wx0, wy0 = window[0], window[1]
+    ring = np.zeros(S.shape, bool)
+    ring[0, :] = ring[-1, :] = ring[:, 0] = ring[:, -1] = True
+    ring &= ~own & ~others
+    if ring.sum() < 8:
+        return np.zeros(2)
+    data = S.astype(np.float64) - b
+    origin = (wx0 + offset[0], wy0 + offset[1])
+    cx, cy, sbar, tot = start
+    valid = ~others
+    fit = fit_spots(data, valid, origin, np.array([cx + offset[0]]), np.array([cy + offset[1]]),
+                    np.array([max(sbar, 0.5)]), np.array([max(tot, 1.0)]), 1.5)
+    if fit is None:
+        return np.zeros(2)
+    model, J = spot_jacobian(data.shape, valid, origin, fit[0], fit[1], fit[2], fit[3])
+    lev = np.einsum("pi,ij,pj->p", J, np.linalg.pinv(J.T @ J), J)
+    vals = data[ring]
+    s2 = (1.4826 * _median(np.abs(vals - _median(vals)))) ** 2 + quantum * quantum / 12.0
+    r2 = (data[valid] - model) ** 2
+    keep = 1.0 - np.clip(lev, 0.0, 1.0)
+    return np.array([float(np.sum(model * (r2 - keep * s2))), float(np.sum(keep * model * model))])
 
 
 def flag_bright(blobs: Blobs, cfg: DetectionConfig) -> Blobs:
-    """Flag blobs much brighter or larger than the frame's other blobs as ``MERGED`` (in place)."""
+    """Flag blobs much brighter or larger than the frame's other blobs as ``MERGED`` (in place), when
+    ``merge_flux_ratio`` or ``merge_area_ratio`` is set (both are off by default)."""
     n = len(blobs)
-    if n < 2:
+    if n < 2 or (cfg.merge_flux_ratio is None and cfg.merge_area_ratio is None):
         return blobs
     for i in range(n):
         others = np.arange(n) != i
         f_ref = _median(blobs.flux[others])
         a_ref = _median(blobs.area[others].astype(float))
-        if (f_ref > 0 and blobs.flux[i] > cfg.merge_flux_ratio * f_ref) or blobs.area[i] > cfg.merge_area_ratio * a_ref:
+        if cfg.merge_flux_ratio is not None and f_ref > 0 and blobs.flux[i] > cfg.merge_flux_ratio * f_ref:
+            blobs.flags[i] |= MERGED
+        if cfg.merge_area_ratio is not None and blobs.area[i] > cfg.merge_area_ratio * a_ref:
             blobs.flags[i] |= MERGED
     return blobs
 
@@ -345,45 +399,6 @@ def _median(a: np.ndarray) -> float:
     a = np.sort(a, axis=None)
     n = a.size
     return 0.5 * float(a[(n - 1) // 2] + a[n // 2])
-
-
-def _peaks(S: np.ndarray, own: np.ndarray) -> list:
-    """Separate intensity peaks inside a blob, as window (x, y): local maxima of the 3×3-smoothed image
-    ≥ 30 % of the highest, ≥ 3 px apart and with a valley in the image (< 80 % of the lower maximum)
-    between them."""
-    if own.sum() < 6:
-        return [None]
-    Sm = cv2.blur(S, (3, 3))
-    mx = cv2.dilate(Sm, np.ones((3, 3), np.uint8))
-    top = Sm[own].max()
-    cand = ((Sm >= mx) & own & (Sm >= 0.3 * top)).astype(np.uint8)
-    n, lab = cv2.connectedComponents(cand, connectivity=8)  # a plateau of maxima is one peak
-    if n <= 2:
-        return [None]
-    xs, ys = [], []
-    for k in range(1, n):
-        yy, xx = np.nonzero(lab == k)
-        j = int(np.argmax(Sm[yy, xx]))
-        xs.append(xx[j])
-        ys.append(yy[j])
-    xs, ys = np.array(xs), np.array(ys)
-    centres = []
-    for i in np.argsort(-Sm[ys, xs], kind="stable"):  # greedy: brightest first
-        p = (float(xs[i]), float(ys[i]))
-        if all(np.hypot(p[0] - c[0], p[1] - c[1]) >= 3.0 and _valley(S, p, c) for c in centres):
-            centres.append(p)
-    return centres
-
-
-def _valley(S: np.ndarray, a, b, depth: float = 0.8) -> bool:
-    """True if the intensity dips below ``depth`` × the lower of two maxima somewhere between them
-    (two blobs), False for a ridge or plateau (a motion streak, a saturated top)."""
-    n = int(np.ceil(2 * np.hypot(a[0] - b[0], a[1] - b[1]))) + 1
-    t = np.linspace(0.0, 1.0, n)
-    xs = np.rint(a[0] + t * (b[0] - a[0])).astype(int)
-    ys = np.rint(a[1] + t * (b[1] - a[1])).astype(int)
-    low = min(S[int(a[1]), int(a[0])], S[int(b[1]), int(b[0])])
-    return bool(S[ys, xs].min() < depth * low)
 
 
 class _LazySignal:
@@ -425,7 +440,7 @@ def detect_full(frame, cfg: DetectionConfig = DetectionConfig(), background=None
         m = _threshold_mask(sig, cfg.threshold)
         _, labels, stats, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
         edge = (x0 == 0, y0 == 0, x1 == fw, y1 == fh)
-        blobs, _ = _measure(sig, g[y0:y1, x0:x1], labels, stats, x0, y0, g.shape, cfg, sat, edge)
+        blobs, _ = _measure(sig, g[y0:y1, x0:x1], labels, stats, x0, y0, g.shape, cfg, sat, edge, _quantum(g))
         parts.append(blobs)
     return flag_bright(Blobs.concat(parts), cfg)
 
@@ -480,7 +495,7 @@ def detect_roi(frame, centres, cfg: DetectionConfig = DetectionConfig(), backgro
             m = _threshold_mask(sig, cfg.threshold)
             _, labels, stats, _ = cv2.connectedComponentsWithStats(m, connectivity=8)
             edge = (x0 == 0, y0 == 0, x1 == fw, y1 == fh)
-            blobs, cut = _measure(sig, g[y0:y1, x0:x1], labels, stats, x0, y0, g.shape, cfg, sat, edge)
+            blobs, cut = _measure(sig, g[y0:y1, x0:x1], labels, stats, x0, y0, g.shape, cfg, sat, edge, _quantum(g))
             if any(cut):
                 grown = True
                 new_boxes.append((max(x0 - r, 0), max(y0 - r, 0), min(x1 + r, fw), min(y1 + r, fh)))

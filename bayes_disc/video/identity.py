@@ -115,8 +115,10 @@ class Candidates:
 
 
 def _gather(blob_uv: list, views: np.ndarray) -> np.ndarray:
+    """Per-blob arrays (n_c, ...) of each camera gathered for candidates' views (K, C) → (K, C, ...) (NaN
+    where a view is unused)."""
     K, C = views.shape
-    uv = np.full((K, C, 2), np.nan)
+    uv = np.full((K, C) + blob_uv[0].shape[1:], np.nan) if blob_uv else np.full((K, C, 2), np.nan)
     for c in range(C):
         sel = views[:, c] >= 0
         if sel.any():
@@ -124,12 +126,17 @@ def _gather(blob_uv: list, views: np.ndarray) -> np.ndarray:
     return uv
 
 
+def _gathered_cov(blob_cov, views):
+    return None if blob_cov is None else _gather(blob_cov, views)
+
+
 def build_candidates(cameras: list[Camera], blob_uv: list, cfg: IdentityConfig, predictions=None,
-                     gate_m=None) -> Candidates:
+                     gate_m=None, blob_cov=None) -> Candidates:
     """Candidate 3-D points from usable blob centroids ``blob_uv[c]`` (n_c, 2) of each camera.
 
     predictions (M, 3) and gate_m (M,): when given, candidates farther than gate_m from every
-    prediction are dropped (tracking mode).
+    prediction are dropped (tracking mode). blob_cov: per camera (n_c, 2, 2) centroid covariances [px²]
+    for the candidates' covariances (default: isotropic ``cfg.pixel_sigma``).
     """
     C = len(cameras)
     pairs = []
@@ -145,7 +152,8 @@ def build_candidates(cameras: list[Camera], blob_uv: list, cfg: IdentityConfig, 
     if not pairs:
         return _no_candidates(C)
     views = np.concatenate(pairs)
-    tri = triangulate(cameras, _gather(blob_uv, views), pixel_sigma=cfg.pixel_sigma, iterations=4)
+    tri = triangulate(cameras, _gather(blob_uv, views), pixel_sigma=cfg.pixel_sigma, iterations=4,
+                      uv_cov=_gathered_cov(blob_cov, views))
     keep = np.isfinite(tri.rms_px) & (tri.rms_px <= cfg.reprojection_px)
     keep &= _in_front(cameras, tri.xyz, views)
     if predictions is not None:
@@ -171,7 +179,8 @@ def build_candidates(cameras: list[Camera], blob_uv: list, cfg: IdentityConfig, 
     grown = np.any(ext != views, axis=1)
     all_views = np.concatenate([views, ext[grown]])
     all_views = np.unique(all_views, axis=0)
-    tri = triangulate(cameras, _gather(blob_uv, all_views), pixel_sigma=cfg.pixel_sigma)
+    tri = triangulate(cameras, _gather(blob_uv, all_views), pixel_sigma=cfg.pixel_sigma,
+                      uv_cov=_gathered_cov(blob_cov, all_views))
     ok = np.isfinite(tri.rms_px) & (tri.rms_px <= cfg.reprojection_px) & (tri.n_views >= cfg.min_views)
     ok &= _in_front(cameras, tri.xyz, all_views)
     if predictions is not None:
@@ -217,10 +226,11 @@ def _near_prediction(X, predictions, gate_m) -> np.ndarray:
 
 
 def label_frame(cameras: list[Camera], blob_uv: list, layout: np.ndarray, cfg: IdentityConfig,
-                predictions=None, pred_sigma=None) -> FrameLabels:
+                predictions=None, pred_sigma=None, blob_cov=None) -> FrameLabels:
     """Label one frame. blob_uv: per camera, usable blob centroids (n_c, 2) [px]; layout (M, 3):
     body-frame marker positions [m]; predictions (M, 3) with NaN rows for markers without prediction,
-    pred_sigma (M,) [m] (None: acquisition without prediction).
+    pred_sigma (M,) [m] (None: acquisition without prediction); blob_cov: per camera, the centroids'
+    covariances (n_c, 2, 2) [px²] (default: isotropic ``cfg.pixel_sigma``).
 
     Long: acquisition and tracking share the candidate search and the assignment's bookkeeping."""
     M, C = len(layout), len(cameras)
@@ -229,7 +239,7 @@ def label_frame(cameras: list[Camera], blob_uv: list, layout: np.ndarray, cfg: I
     full_prediction = tracking and bool(np.all(np.isfinite(predictions)))
     if full_prediction:
         gate = cfg.gate_sigma * np.asarray(pred_sigma, float)
-    cands = build_candidates(cameras, blob_uv, cfg, predictions if full_prediction else None, gate)
+    cands = build_candidates(cameras, blob_uv, cfg, predictions if full_prediction else None, gate, blob_cov)
     out = FrameLabels.empty(M, C)
     K = len(cands)
     if K == 0:

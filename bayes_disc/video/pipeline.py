@@ -1,97 +1,55 @@
 """``bayes-disc track TRACK.yaml``: footage (or imported points) + calibration → marker file (docs/data-formats.md).
 
-For every reference frame f (time t = t0 + f / fps) and every camera c, the camera's frame
-i = f − frame_offset_c is read, blobs are detected (full frame, or in windows around the predicted
-marker pixels once the tracker has a prediction), merged and edge blobs are dropped, the markers are
-labelled and triangulated (:mod:`.identity`, :mod:`.triangulation`) and the tracker is updated.
+Footage is tracked in stages:
+
+1. **synchronisation** — cameras without a ``frame_offset`` get one estimated from the footage
+   (:mod:`.sync`; every frame is detected in full first);
+2. **labelling** — frame by frame: detection, labelling on the rigid layout, tracking (:mod:`.labelling`);
+3. **second pass** — sub-frame delays estimated (for cameras whose offset was estimated) and applied,
+   views holding two markers' light or disagreeing with the others left out, each camera's pixel noise
+   calibrated against the residuals, points triangulated again (:mod:`.refine`);
+4. **checks** — every point against the rigid layout and its neighbours in time; inconsistent points
+   are inflated or left out (:mod:`.consistency`).
+
 The output has one row per reference frame and marker (NaN where the marker was not labelled: gaps are
-never filled) with extra columns ``reproj_rms_px``, ``n_views`` and the covariance ``cov_xx, cov_xy,
-cov_xz, cov_yy, cov_yz, cov_zz`` [m²] = σ_px² (Σ JᵀJ)⁻¹ with σ_px = ``triangulation.pixel_sigma``, or
-(``auto``, the default) the pooled estimate σ̂² = Σ n·rms² / Σ (2n − 3) over the flight's points.
+never filled), stamped t = t0 + f / fps at the middle of the exposure (+ exposure_s / 2 when the frame
+stamps mark the exposure's start, ``timestamps.convention: exposure-start``), with extra columns
+``reproj_rms_px``, ``n_views``, the covariance ``cov_xx, cov_xy, cov_xz, cov_yy, cov_yz, cov_zz`` [m²]
+and ``flag`` (``ok`` or the reasons a point was inflated or left out). With ``triangulation.pixel_sigma:
+auto`` (the default) the covariance is (Σ_c J_cᵀ W_c J_c)⁻¹ with W_c⁻¹ = the blob's own centroid
+covariance + σ_c² I (σ_c: the camera noise of :mod:`.refine`); with a number σ it is σ² (Σ_c J_cᵀ J_c)⁻¹.
+Beside the CSV, ``<output stem>.json`` holds the frame offsets used (given or estimated), the
+timestamp convention, the camera noise and the counts of the run.
 
 The configuration format is documented in ``bayes_disc/video/README.md``.
 """
 from __future__ import annotations
 
+import json
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from .calibration import (ImageConvention, UNITS, cameras_from_dlt_csv, dlt_calibrate, read_anipose_toml,
-                          read_camera_yaml, read_control_points, read_image_points, refine_camera,
-                          write_camera_yaml)
-from .config import Section, load_yaml
-from .detection import Blobs, DetectionConfig, detect_full, detect_roi
+from .consistency import check_points
 from .errors import VideoInputError
 from .footage import open_source
-from .identity import FrameLabels, IdentityConfig, Tracker, label_frame, layout_distinctness
-from .imports import FORMATS, DEFAULT_CONVENTION, read_xypts, read_xyzpts, reprojection_check
+from .imports import read_xypts, read_xyzpts, reprojection_check
+from .labelling import FramePass, backgrounds_of, detect_all, label_frames
+from .refine import CameraNoise, Views, refine, shifted, shot_noise, triangulate_views
+from .sync import SyncResult, coarse_subframe, estimate_frame_offsets, estimate_subframe, typical_motion
+from .track_config import CameraInput, TrackConfig, parse_track_config  # noqa: F401  (the configuration API)
 from .triangulation import triangulate
 from ..observation.markers import COV_COLUMNS, COV_INDEX
-
-
-
-@dataclass
-class CameraInput:
-    """Footage of one camera: its source string and frame offset (camera frame i ↔ reference i + offset)."""
-
-    name: str
-    source: str
-    frame_offset: int = 0
-
-
-@dataclass
-class ImportSpec:
-    """Points digitised with another tool (see :mod:`.imports`)."""
-
-    fmt: str
-    xypts: Path | None
-    xyzpts: Path | None
-    metres_per_unit: float
-    convention: ImageConvention
-    cameras: list
-    points: dict
-    first_frame: int
-    max_check_rms_px: float
-
-
-@dataclass
-class TrackConfig:
-    """A parsed TRACK.yaml (see README). ``cameras`` holds the calibrated cameras used, in order."""
-
-    path: Path
-    flight: str
-    fps: float
-    t0: float
-    markers: dict
-    cameras: dict
-    inputs: list = field(default_factory=list)
-    importing: ImportSpec | None = None
-    frames: tuple | None = None
-    detection: DetectionConfig = DetectionConfig()
-    roi: bool = True
-    background: str = "none"
-    background_frames: int = 25
-    identity: IdentityConfig = IdentityConfig()
-    pixel_sigma: float | None = None  # None: estimated from the reprojection residuals ("auto")
-    output: Path | None = None
-    calibration_report: str = ""
-
-    @property
-    def layout(self) -> np.ndarray:
-        return np.array([self.markers[m] for m in self.markers], float)
-
-    @property
-    def marker_ids(self) -> list:
-        return list(self.markers)
 
 
 @dataclass
 class TrackResult:
     """Tracks on the reference frames: frames (F,), times (F,) [s], xyz (F, M, 3) [m], rms_px (F, M),
-    n_views (F, M), cov (F, M, 3, 3) [m²]; stats: counts for the report."""
+    n_views (F, M), cov (F, M, 3, 3) [m²]; stats: counts for the report; flags (F, M): ``ok`` or the
+    reasons a point was inflated or left out (None for imported points); meta: what the run used (frame
+    offsets, timestamp convention, camera noise), written beside the CSV."""
 
     flight: str
     marker_ids: list
@@ -102,6 +60,8 @@ class TrackResult:
     n_views: np.ndarray
     cov: np.ndarray
     stats: dict = field(default_factory=dict)
+    flags: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
 
     def table(self):
         """The result as a :class:`bayes_disc.observation.markers.MarkerTable` (frame-major rows)."""
@@ -112,14 +72,20 @@ class TrackResult:
                  "n_views": self.n_views.reshape(-1).astype(int)}
         for name, (i, j) in zip(COV_COLUMNS, COV_INDEX):
             extra[name] = self.cov[:, :, i, j].reshape(-1).astype(float)
+        if self.flags is not None:
+            extra["flag"] = np.array([str(x) for x in self.flags.reshape(-1)], dtype=object)
         return MarkerTable(flight=np.full(F * M, self.flight, dtype=object), t=np.repeat(self.times, M),
                            marker=np.tile(np.array(self.marker_ids, dtype=object), F),
                            xyz=self.xyz.reshape(-1, 3), extra=extra)
 
     def write(self, path) -> None:
+        """Write the marker file and, when there is metadata, ``<stem>.json`` beside it."""
         from ..observation.markers import write_marker_csv
 
         write_marker_csv(path, self.table())
+        if self.meta:
+            Path(path).with_suffix(".json").write_text(json.dumps({**self.meta, "stats": _jsonable(self.stats)},
+                                                                  indent=2, ensure_ascii=False))
 
     def summary(self) -> str:
         seen = np.all(np.isfinite(self.xyz), axis=2)
@@ -132,232 +98,16 @@ class TrackResult:
         return "; ".join(parts)
 
 
-# ---------------------------------------------------------------------------------------------------
-# configuration
-# ---------------------------------------------------------------------------------------------------
-def _markers(sec: Section) -> dict:
-    raw = sec.raw("markers", None, required=True)
-    if not isinstance(raw, dict) or len(raw) < 3:
-        raise sec.error("markers", "must map at least 3 marker ids to body positions [x, y, z] (m)")
-    ms = Section(sec.path, raw, "markers")
-    out = {str(k): ms.vector(k, 3, required=True) for k in ms.keys()}
-    ms.finish()
-    layout = np.array(list(out.values()))
-    d = np.linalg.norm(layout[:, None] - layout[None], axis=2)[np.triu_indices(len(layout), 1)]
-    if np.min(d) < 0.005:
-        raise sec.error("markers", "two markers are closer than 5 mm")
-    return out
-
-
-def _check_layout(sec: Section, markers: dict, ident: IdentityConfig) -> None:
-    """Footage needs a layout whose side lengths identify the markers (a scalene triangle): reject one
-    that some relabelling changes by less than side_sigma_m · √max(ambiguity_margin, 1) (then every
-    frame would be ambiguous, see :mod:`.identity`)."""
-    sep = layout_distinctness(np.array(list(markers.values()), float))
-    need = ident.side_sigma_m * np.sqrt(max(ident.ambiguity_margin, 1.0))
-    if np.isfinite(sep) and sep < need:
-        raise sec.error("markers", f"the layout is (nearly) symmetric: relabelling the markers changes the side "
-                                   f"lengths by only {1e3 * sep:.1f} mm (need ≥ {1e3 * need:.1f} mm = identity."
-                                   "side_sigma_m · √ambiguity_margin), so they could never be told apart; use a "
-                                   "scalene layout")
-
-
-def _convention(sec: Section, default: ImageConvention) -> ImageConvention:
-    origin = sec.string("origin", default.origin, choices=("top-left", "bottom-left"))
-    first = sec.number("first_pixel", default.first_pixel)
-    return ImageConvention(origin, first)
-
-
-def _image_sizes(sec: Section, key: str, names: list) -> dict:
-    v = sec.raw(key, None)
-    if v is None:
-        raise sec.error(key, "is required ([width, height] for all cameras, or a mapping camera → [width, height])")
-    if isinstance(v, dict):
-        s = Section(sec.path, v, sec.key(key))
-        out = {n: tuple(s.vector(n, 2, required=True, integer=True)) for n in names}
-        s.finish()
-        return out
-    size = Section(sec.path, {key: v}, sec.prefix).vector(key, 2, integer=True)
-    return {n: tuple(size) for n in names}
-
-
-def load_calibration(sec: Section) -> tuple[dict, str]:
-    """Cameras from a ``calibration`` section; returns ({name: Camera}, report text)."""
-    fmt = sec.string("format", "bayes-disc", choices=("bayes-disc", "dlt-csv", "anipose", "control-points"))
-    report = ""
-    if fmt == "bayes-disc":
-        cams = read_camera_yaml(sec.path_of("file", required=True))
-    elif fmt == "anipose":
-        cams = read_anipose_toml(sec.path_of("file", required=True), UNITS[sec.string("units", "m", choices=tuple(UNITS))])
-    elif fmt == "dlt-csv":
-        path = sec.path_of("file", required=True)
-        names = sec.raw("cameras", None, required=True)
-        if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
-            raise sec.error("cameras", "must be a list of camera names, one per column of the DLT file")
-        sizes = _image_sizes(sec, "image_size", names)
-        conv = _convention(sec, ImageConvention("bottom-left", 1.0))
-        cams = cameras_from_dlt_csv(path, names, sizes, conv, UNITS[sec.string("units", "m", choices=tuple(UNITS))])
-    else:  # control points
-        ids, xyz = read_control_points(sec.path_of("points", required=True))
-        ip = sec.section("image_points", required=True)
-        names = ip.keys()
-        if not names:
-            raise sec.error("image_points", "no cameras given")
-        files = {n: ip.path_of(n, required=True) for n in names}
-        ip.finish()
-        sizes = _image_sizes(sec, "image_size", names)
-        conv = _convention(sec, ImageConvention("top-left", 0.0))
-        dist_terms = sec.raw("distortion", [])
-        if not isinstance(dist_terms, list):
-            raise sec.error("distortion", "must be a list of distortion terms, e.g. [k1, k2]")
-        cams, lines = {}, []
-        for n in names:
-            pts = read_image_points(files[n])
-            unknown = [p for p in pts if p not in ids]
-            if unknown:
-                raise VideoInputError(f"{files[n]}: point {unknown[0]!r} is not in the control-point file")
-            uv = np.array([conv.to_opencv(pts[p], sizes[n][1]) if p in pts else [np.nan, np.nan] for p in ids])
-            cal = dlt_calibrate(xyz, uv, name=n, image_size=sizes[n], point_ids=ids)
-            cam = cal.camera
-            lines.append(cal.report())
-            if dist_terms:
-                cam = refine_camera(cam, xyz, uv, [str(d) for d in dist_terms])
-                res = cam.project(xyz) - uv
-                ok = np.all(np.isfinite(res), axis=1)
-                lines.append(f"  refined with distortion {dist_terms}: RMS {np.sqrt(np.mean(np.sum(res[ok] ** 2, 1))):.3f} px")
-            cams[n] = cam
-        report = "\n".join(lines)
-        out = sec.string("write", None)
-        if out is not None:
-            write_camera_yaml(sec.folder / out, cams)
-    sec.finish()
-    return cams, report
-
-
-def parse_track_config(path) -> TrackConfig:
-    """Read and check a TRACK.yaml (unknown keys are errors naming the key).
-
-    Long: one validation pass over the file's keys, in the order their errors are reported."""
-    path = Path(path)
-    sec = Section(path, load_yaml(path))
-    flight = sec.string("flight", path.stem)
-    fps = sec.number("fps", required=True, positive=True)
-    t0 = sec.number("t0", 0.0)
-    markers = _markers(sec)
-    frames = sec.vector("frames", 2, integer=True)
-    if frames is not None and frames[1] < frames[0]:
-        raise sec.error("frames", f"end {frames[1]} is before start {frames[0]}")
-    cams, report = load_calibration(sec.section("calibration", required=True))
-    if sec.has("cameras") and sec.has("import"):
-        raise sec.error("import", "give either 'cameras' (footage) or 'import' (digitised points), not both")
-    inputs, importing = [], None
-    if sec.has("import"):
-        importing = _parse_import(sec.section("import"), cams)
-        used = {n: cams[n] for n in importing.cameras}
-    else:
-        cs = sec.section("cameras", required=True)
-        for name in cs.keys():
-            name = str(name)
-            c = cs.section(name)
-            if name not in cams:
-                raise cs.error(name, f"camera {name!r} is not in the calibration (it has: {', '.join(cams)})")
-            inputs.append(CameraInput(name, c.string("source", required=True), c.number("frame_offset", 0, integer=True)))
-            c.finish()
-        if len(inputs) < 2:
-            raise sec.error("cameras", "at least two cameras are needed to triangulate")
-        used = {i.name: cams[i.name] for i in inputs}
-    ds = sec.section("detection")
-    try:
-        det = DetectionConfig(
-            threshold=ds.number("threshold", 30.0, positive=True), min_area=ds.number("min_area", 2, integer=True, minimum=1),
-            max_area=ds.number("max_area", 5000, integer=True, minimum=1), pad=ds.number("pad", 3, integer=True, minimum=1),
-            mask_dilation=ds.number("mask_dilation", 2, integer=True, nonnegative=True),
-            noise_floor_sigma=ds.number("noise_floor_sigma", 2.0, nonnegative=True),
-            saturation=ds.number("saturation", None, positive=True),
-            max_elongation=ds.number("max_elongation", 2.0, minimum=1.0),
-            merge_flux_ratio=ds.number("merge_flux_ratio", 1.6, minimum=1.0),
-            merge_area_ratio=ds.number("merge_area_ratio", 2.0, minimum=1.0),
-            expected_area=ds.number("expected_area", None, positive=True),
-            roi_radius=ds.number("roi_radius", 16, integer=True, minimum=2), tile=ds.number("tile", 8, integer=True, minimum=2),
-            deblend=ds.boolean("deblend", True))
-    except ValueError as e:
-        if isinstance(e, VideoInputError):
-            raise
-        raise VideoInputError(f"{path}: key 'detection': {e}") from None
-    roi = ds.boolean("roi", True)
-    background = ds.string("background", "none", choices=("none", "median"))
-    bg_frames = ds.number("background_frames", 25, integer=True, minimum=3)
-    ds.finish()
-    ids = sec.section("identity")
-    ts = sec.section("triangulation")
-    try:
-        ident = IdentityConfig(
-            reprojection_px=ids.number("reprojection_px", 2.0, positive=True),
-            reprojection_sigma_px=ids.number("reprojection_sigma_px", 0.5, positive=True),
-            side_sigma_m=ids.number("side_sigma_m", 0.003, positive=True),
-            prediction_sigma_m=ids.number("prediction_sigma_m", 0.01, positive=True),
-            cv_sigma_m=ids.number("cv_sigma_m", 0.03, positive=True),
-            gate_sigma=ids.number("gate_sigma", 5.0, positive=True),
-            miss_cost=ids.number("miss_cost", 25.0, positive=True),
-            view_bonus=ids.number("view_bonus", 1.0, nonnegative=True),
-            missing_view_cost=ids.number("missing_view_cost", 4.0, nonnegative=True),
-            ambiguity_margin=ids.number("ambiguity_margin", 9.0, nonnegative=True),
-            swap_distance_m=ids.number("swap_distance_m", 0.02, positive=True),
-            max_gap_frames=ids.number("max_gap_frames", 5, integer=True, minimum=1),
-            max_pose_gap=ids.number("max_pose_gap", 2, integer=True, minimum=1),
-            min_views=ts.number("min_views", 2, integer=True, minimum=2))
-    except ValueError as e:
-        if isinstance(e, VideoInputError):
-            raise
-        raise VideoInputError(f"{path}: key 'identity': {e}") from None
-    if importing is None:
-        _check_layout(sec, markers, ident)
-    ps = ts.raw("pixel_sigma", "auto")
-    if ps == "auto":
-        pixel_sigma = None
-    else:
-        pixel_sigma = ts.number("pixel_sigma", positive=True)
-    ids.finish()
-    ts.finish()
-    out = sec.string("output", f"{flight}_tracks.csv")
-    sec.finish()
-    return TrackConfig(path, flight, fps, t0, markers, used, inputs, importing, tuple(frames) if frames else None,
-                       det, roi, background, bg_frames, ident, pixel_sigma, path.parent / out, report)
-
-
-def _parse_import(sec: Section, cams: dict) -> ImportSpec:
-    fmt = sec.string("format", required=True, choices=FORMATS)
-    xy = sec.path_of("xypts")
-    xyz = sec.path_of("xyzpts")
-    if xy is None and xyz is None:
-        raise sec.error("xypts", "give xypts (2-D points), xyzpts (3-D points) or both")
-    names = sec.raw("cameras", None)
-    if names is None:
-        names = list(cams)
-    if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
-        raise sec.error("cameras", "must be a list of calibration camera names (camera 1, 2, ... of the file)")
-    for n in names:
-        if n not in cams:
-            raise sec.error("cameras", f"camera {n!r} is not in the calibration (it has: {', '.join(cams)})")
-    pts = sec.raw("points", None, required=True)
-    if not isinstance(pts, dict) or not pts:
-        raise sec.error("points", "must map the file's point names to marker ids, e.g. {pt1: '0'}")
-    spec = ImportSpec(fmt, xy, xyz, UNITS[sec.string("units", "m", choices=tuple(UNITS))],
-                      _convention(sec, DEFAULT_CONVENTION[fmt]), list(names), {str(k): str(v) for k, v in pts.items()},
-                      sec.number("first_frame", 0, integer=True), sec.number("max_check_rms_px", 3.0, positive=True))
-    sec.finish()
-    return spec
-
-
-# ---------------------------------------------------------------------------------------------------
-# running
-# ---------------------------------------------------------------------------------------------------
-def _median_background(src, first: int, last: int, n: int):
-    idx = np.unique(np.linspace(first, last, n).round().astype(int))
-    frames = [f for f in (src.get(i) for i in idx) if f is not None]
-    if len(frames) < 3:
-        return None
-    return np.median(np.stack(frames), axis=0).astype(np.float32)
+def _jsonable(x):
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (np.floating,)):
+        return float(x)
+    return x
 
 
 def estimate_pixel_sigma(rms_px: np.ndarray, n_views: np.ndarray) -> tuple[float, int]:
@@ -388,81 +138,161 @@ def _calibrate_covariance(result: "TrackResult", cfg: "TrackConfig") -> None:
     result.stats["pixel sigma used for the covariance (px)"] = round(float(target), 4)
 
 
+def _open_sources(cfg: TrackConfig, sources: dict | None) -> list:
+    out = []
+    for inp in cfg.inputs:
+        out.append(sources[inp.name] if sources is not None and inp.name in sources
+                   else open_source(inp.source, cfg.path.parent))
+    return out
+
+
+def _synchronise(cfg: TrackConfig, cams: list, names: list, usable) -> SyncResult:
+    """Frame offsets: the given ones (a fraction is a sub-frame delay) and, from ``usable`` (per camera
+    {camera frame: usable centroids}), the others estimated (:mod:`.sync`), with a first guess of their
+    sub-frame delays."""
+    given = {i.name: i.frame_offset for i in cfg.inputs if i.frame_offset is not None}
+    whole = {n: int(round(v)) for n, v in given.items()}
+    if all(i.frame_offset is not None for i in cfg.inputs):
+        sync = SyncResult(offsets=dict(whole), source={n: "config" for n in whole})
+    else:
+        tau = cfg.sync.tau_px if cfg.sync.tau_px is not None else max(3.0, 0.5 * typical_motion(usable))
+        try:
+            sync = estimate_frame_offsets(cams, names, usable, whole, cfg.sync.max_offset, tau)
+        except ValueError as e:
+            raise VideoInputError(f"{cfg.path}: {e}") from None
+        free = [c for c, n in enumerate(names) if sync.source[n] == "estimated"]
+        if cfg.sync.subframe and free:
+            guess = coarse_subframe(cams, names, usable, sync.offsets, free, 1.5)
+            sync.subframe.update({names[c]: guess[c] for c in free})
+    for n, v in given.items():
+        sync.subframe[n] = float(v) - whole[n]
+    return sync
+
+
 def track_footage(cfg: TrackConfig, sources: dict | None = None, progress: bool = True) -> TrackResult:
-    """Run detection, identity and triangulation over the reference frames.
+    """Synchronise, detect, label, refine and check over the reference frames (module docstring).
 
     sources: optional {camera name: frame source} overriding the config's ``source`` strings (tests).
     """
-    from tqdm import tqdm
-
     names = [i.name for i in cfg.inputs]
     cams = [cfg.cameras[n] for n in names]
-    offsets = [i.frame_offset for i in cfg.inputs]
-    srcs = []
-    for inp in cfg.inputs:
-        if sources is not None and inp.name in sources:
-            srcs.append(sources[inp.name])
-        else:
-            srcs.append(open_source(inp.source, cfg.path.parent))
+    srcs = _open_sources(cfg, sources)
     try:
-        if cfg.frames is not None:
-            f0, f1 = cfg.frames
-        else:
-            ranges = [(s.frame_range()[0] + k, s.frame_range()[1] + k) for s, k in zip(srcs, offsets)]
-            f0, f1 = min(r[0] for r in ranges), max(r[1] for r in ranges)
-        backgrounds = [None] * len(srcs)
-        if cfg.background == "median":
-            for c, s in enumerate(srcs):
-                a, b = s.frame_range()
-                backgrounds[c] = _median_background(s, a, b, cfg.background_frames)
-        frames = np.arange(f0, f1 + 1)
-        F, M, C = len(frames), len(cfg.markers), len(cams)
-        xyz = np.full((F, M, 3), np.nan)
-        rms = np.full((F, M), np.nan)
-        nv = np.zeros((F, M), int)
-        cov = np.full((F, M, 3, 3), np.nan)
-        layout = cfg.layout
-        tracker = Tracker(layout, cfg.identity)
-        n_missing = [0] * C
-        n_roi = n_full = n_blobs = n_unusable = n_ambiguous = 0
-        r = cfg.detection.roi_radius
-        for k, f in enumerate(tqdm(frames, desc=f"track {cfg.flight}", unit="frame", disable=not progress)):
-            pred, psig = tracker.predict(int(f))
-            blob_uv = []
-            for c, (cam, src) in enumerate(zip(cams, srcs)):
-                img = src.get(int(f - offsets[c]))
-                if img is None:
-                    n_missing[c] += 1
-                    blob_uv.append(np.zeros((0, 2)))
-                    continue
-                if img.shape[:2] != (cam.height, cam.width):
-                    raise VideoInputError(f"camera {cam.name}: frame {int(f - offsets[c])} is "
-                                          f"{img.shape[1]}×{img.shape[0]} px but the calibration says "
-                                          f"{cam.width}×{cam.height}")
-                if cfg.roi and pred is not None:
-                    ctr = cam.project(pred[np.all(np.isfinite(pred), axis=1)])
-                    ctr = ctr[np.all(np.isfinite(ctr), axis=1) & cam.in_image(ctr, margin=-r)]
-                    blobs = detect_roi(img, ctr, cfg.detection, backgrounds[c]) if len(ctr) else Blobs()
-                    n_roi += 1
-                else:
-                    blobs = detect_full(img, cfg.detection, backgrounds[c])
-                    n_full += 1
-                n_blobs += len(blobs)
-                n_unusable += int((~blobs.usable).sum())
-                blob_uv.append(blobs.uv[blobs.usable])
-            lab: FrameLabels = label_frame(cams, blob_uv, layout, cfg.identity, pred, psig)
-            tracker.update(int(f), lab.xyz)
-            xyz[k], rms[k], nv[k], cov[k] = lab.xyz, lab.rms_px, lab.n_views, lab.cov
-            n_ambiguous += int(lab.ambiguous.sum())
+        backgrounds = backgrounds_of(cfg, srcs)
+        # detect every frame first when offsets are to be estimated or a camera has a sub-frame delay
+        estimate = any(i.frame_offset is None or i.frame_offset != round(i.frame_offset) for i in cfg.inputs)
+        cached = detect_all(cfg, cams, srcs, backgrounds, progress) if estimate else None
+        usable = None if cached is None else [{i: b.uv[b.usable] for i, b in d.items()} for d in cached]
+        sync = _synchronise(cfg, cams, names, usable)
+        offsets = [sync.offsets[n] for n in names]
+        start = [sync.subframe.get(n, 0.0) for n in names]
+        fp = label_frames(cfg, cams, srcs, offsets, backgrounds, cached, progress,
+                          start if any(start) else None)
+        delays = _subframe_delays(cfg, cams, names, _views_for_covariance(cfg, fp.views), sync)
+        if any(abs(delays[c] - start[c]) >= 0.02 for c in range(len(cams))):
+            # label again with the delayed cameras' blobs moved to the reference instants
+            fp = label_frames(cfg, cams, srcs, offsets, backgrounds, cached, progress,
+                              [delays[c] for c in range(len(cams))])
     finally:
         for s in srcs:
             s.close()
-    stats = {"frames missing per camera": dict(zip(names, n_missing)), "ROI detections": n_roi,
-             "full-frame detections": n_full, "blobs": n_blobs, "merged/edge blobs dropped": n_unusable,
-             "ambiguous labels left NaN": n_ambiguous}
-    result = TrackResult(cfg.flight, cfg.marker_ids, frames, cfg.t0 + frames / cfg.fps, xyz, rms, nv, cov, stats)
-    _calibrate_covariance(result, cfg)
-    return result
+    return _second_pass(cfg, cams, names, fp, sync, delays)
+
+
+def _views_for_covariance(cfg: TrackConfig, views: Views) -> Views:
+    """The views with a fixed ``pixel_sigma`` in place of the blobs' own covariances, when one is given."""
+    if cfg.pixel_sigma is None:
+        return views
+    views = views.copy()
+    views.cov[views.seen] = cfg.pixel_sigma ** 2 * np.eye(2)
+    views.cov_shot[:] = 0.0
+    return views
+
+
+def _subframe_delays(cfg: TrackConfig, cams: list, names: list, views: Views, sync: SyncResult) -> dict:
+    """Sub-frame delays {camera index: δ}: given fractions, and estimates for the cameras whose offset
+    was estimated (robust χ² with a 0.3 px floor per view, :func:`.sync.estimate_subframe`)."""
+    delays = {c: sync.subframe.get(n, 0.0) for c, n in enumerate(names)}
+    free = [c for c, n in enumerate(names) if sync.source.get(n) == "estimated"]
+    if not (free and cfg.sync.subframe):
+        return delays
+    floor = CameraNoise(np.full(len(cams), 0.3), np.zeros(len(cams)))
+
+    def loss(d: dict) -> float:
+        tri = triangulate_views(cams, shifted(views, d), floor, cfg.identity.min_views)
+        q = tri.chi2[np.isfinite(tri.chi2)]
+        return float(np.sum(np.log1p(q / 10.0)))
+
+    est, se = estimate_subframe(loss, free, delays)
+    for c in free:
+        sync.subframe[names[c]] = float(est[c])
+        sync.subframe_se[names[c]] = float(se[c])
+        sync.messages.append(f"camera {names[c]}: sub-frame delay {est[c]:+.3f} ± {se[c]:.3f} frames estimated")
+    return est
+
+
+def _second_pass(cfg: TrackConfig, cams: list, names: list, fp: FramePass, sync: SyncResult,
+                 delays: dict) -> TrackResult:
+    """Sub-frame shift, view refinement, checks; the result with flags and metadata."""
+    F, M = fp.views.uv.shape[:2]
+    views = shifted(_views_for_covariance(cfg, fp.views), {c: d for c, d in delays.items() if d}, names)
+    auto = cfg.pixel_sigma is None
+    alpha = shot_noise(fp.shot_stats) if auto and cfg.detection.gain is None else np.zeros(len(cams))
+    ref = refine(cams, views, names, CameraNoise(np.zeros(len(cams)), alpha), calibrate=auto,
+                 min_views=cfg.identity.min_views, level=cfg.outlier_level)
+    tri = ref.tri
+    xyz, cov = tri.xyz.reshape(F, M, 3), tri.cov.reshape(F, M, 3, 3)
+    checks = check_points(xyz, cov, cfg.layout, cfg.checks)
+    flags = _flags(fp, ref.views, xyz, checks, cfg.checks.action)
+    if cfg.checks.action == "drop":
+        out = checks.flag != ""
+        xyz, cov = xyz.copy(), cov.copy()
+        xyz[out], cov[out] = np.nan, np.nan
+    else:
+        cov = cov + checks.inflation
+    nv = np.where(np.all(np.isfinite(xyz), axis=2), tri.n_views.reshape(F, M), 0)
+    rms = np.where(nv > 0, tri.rms_px.reshape(F, M), np.nan)
+    stats = dict(fp.stats)
+    stats["views left out"] = ref.dropped
+    stats["points flagged by the checks"] = int(np.sum(checks.flag != ""))
+    stats["camera pixel noise added (px)"] = {n: round(float(v), 4) for n, v in zip(names, ref.noise.sigma)}
+    if cfg.pixel_sigma is None and cfg.detection.gain is None:
+        stats["gain measured on the blobs (e-/DN)"] = {n: (round(float(1 / a), 2) if a > 1e-9 else "no shot noise seen")
+                                                       for n, a in zip(names, ref.noise.alpha)}
+    stats["frame offsets"] = {n: round(sync.total(n), 4) for n in names}
+    if sync.messages:
+        stats["synchronisation"] = " | ".join(sync.messages)
+    meta = {"flight": cfg.flight, "fps": cfg.fps, "t0": cfg.t0,
+            "timestamps": {"convention": cfg.timestamps, "exposure_s": cfg.exposure_s,
+                           "row_time": "middle of the exposure of the reference frame: t0 + f / fps"
+                                       + (" + exposure_s / 2" if cfg.timestamps == "exposure-start" else "")},
+            "cameras": {n: {**sync.as_dict()[n], "pixel_noise_px": round(float(s), 4),
+                            "shot_noise_per_gain": round(float(a), 5)}
+                        for n, s, a in zip(names, ref.noise.sigma, ref.noise.alpha)},
+            "pixel_sigma": "auto" if cfg.pixel_sigma is None else cfg.pixel_sigma,
+            "checks": {"action": cfg.checks.action, "prediction_sigma_m": checks.prediction_sigma}}
+    times = cfg.t0 + fp.frames / cfg.fps + cfg.time_shift
+    return TrackResult(cfg.flight, cfg.marker_ids, fp.frames, times, xyz, rms, nv, cov, stats, flags, meta)
+
+
+def _flags(fp: FramePass, views: Views, xyz: np.ndarray, checks, action: str) -> np.ndarray:
+    """Per point: ``ok``, or the reasons (views left out, check results) joined by '; '."""
+    F, M = xyz.shape[:2]
+    out = np.empty((F, M), object)
+    verb = "left out" if action == "drop" else "covariance inflated"
+    for f, m in np.ndindex(F, M):
+        parts = list(views.notes[f, m])
+        if checks.flag[f, m]:
+            parts.append(f"{verb}: {checks.flag[f, m]}")
+        if not np.all(np.isfinite(xyz[f, m])):
+            if fp.ambiguous[f, m]:
+                parts.append("identity ambiguous")
+            elif not parts:
+                parts.append("not labelled")
+            elif not checks.flag[f, m]:
+                parts.append("fewer than two views left")
+        out[f, m] = "; ".join(parts) if parts else "ok"
+    return out
 
 
 def track_import(cfg: TrackConfig) -> TrackResult:
