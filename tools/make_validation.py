@@ -470,6 +470,8 @@ def section_real() -> list[str]:
     for f in sorted(p.name for p in (ROOT / "runs/flatball/loo").iterdir() if p.is_dir()):
         pred = load(f"runs/flatball/loo/{f}/out_held/prediction.json")
         for fl, rec in pred["flights"].items():
+            if rec["status"] != "ok":
+                prow.append([fl, "—", "—", "—", "—", f"{rec['status']}: {rec['reason']}"])
             for ch, v in rec.get("channels", {}).items():
                 prow.append([fl, ch, v["unit"], fmt(v["rms_fixed"]), fmt(v["rms_free"]),
                              f"{v['rms_fixed'] / v['rms_free']:.2f}"])
@@ -502,9 +504,10 @@ def section_real() -> list[str]:
           + "The coefficients from these throws are **not findings**: the model lacks the physics of this "
             "instrumented disc." if far > 1.5 else
           f"Verdict: the misfit is within {max(ratios):.1f}× the noise floor.", "",
-          "Reproduce (about 15 min for `sample`, over an hour for `diagnose`, on two cores): "
+          f"Reproduce (the committed runs took {load('runs/flatball/out/run_info.json')['wall_time_s'] / 60:.0f} min "
+          f"for `sample` and {diag['wall_time_s'] / 60:.0f} min for `diagnose` on two shared cores): "
           "`bayes-disc sample runs/flatball/config.yaml`, `bayes-disc diagnose runs/flatball/config.yaml "
-          "--no-sample`, and per fold `bayes-disc identifiability runs/flatball/loo/<throw>/fit.yaml` then "
+          f"--no-sample{' --no-learn' if not ld else ''}`, and per fold `bayes-disc identifiability runs/flatball/loo/<throw>/fit.yaml` then "
           "`bayes-disc predict runs/flatball/loo/<throw>/held.yaml --from runs/flatball/loo/<throw>/out_fit`.", ""]
     return L
 
