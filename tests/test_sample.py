@@ -225,6 +225,9 @@ def test_sampler_agrees_with_importance_sampling(four_flights_run, four_flights)
     d = four_flights_run
     summary, _ = four_flights
     problem = build_problem(load_config(d / "config.yaml"))
+    if (d / "out/ic_reference.json").is_file():      # the run's initial conditions' reference prior
+        from bayes_disc.inference.model.priors import surrogate_from_dict
+        problem = problem.with_ic_reference(surrogate_from_dict(json.loads((d / "out/ic_reference.json").read_text())))
     q = _with_defensive_t(CompositeProposal.load(d / "out/chains/independence.npz"), _kept_samples(d / "out", problem.dim))
     mean, sd = _importance_moments(problem, q)
     for i, name in enumerate(summary["coefficients"]):

@@ -30,6 +30,8 @@ from ..inference.model.config import RunConfig
 from ..inference.model.data import build_problem
 from ..inference.model.describe import data_words, flight_info, noise_info, noise_words
 from ..inference.model.inertial import load_run_throws
+from ..inference.model.priors import surrogate_from_dict
+from ..inference.fitting.reference import build_ic_reference
 from ..inference.fitting.leastsq import START_FLIGHTS, fit_least_squares, noise_text
 from ..inference.fitting.profile import MAX_LOWER_REFITS, lowest_point, profiles_through_lowest
 from ..inference.sampling.proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
@@ -53,6 +55,10 @@ logger = logging.getLogger(__name__)
 RUN_KEY = "run_key.json"
 #: sampler settings that may change on resume (the stopping rule, the cap, parallelism)
 RESUMABLE_SETTINGS = ("max_steps", "check_every", "min_steps", "n_tau", "rhat", "ess", "processes")
+#: the conditional reference prior's surrogate of a run (``prior.initial_conditions: reference``), read on resume
+IC_REFERENCE = "ic_reference.json"
+#: a surrogate whose held-out rms error exceeds this share of the exact value's spread is reported (a warning)
+POOR_SURROGATE = 0.1
 #: least-squares files a resume reuses
 LEAST_SQUARES_FILES = ("least_squares.json", "least_squares_theta.npy", "least_squares_cov.npy")
 
@@ -78,7 +84,7 @@ def run_key(cfg: RunConfig, problem) -> dict:
     settings["walkers"] = n_walkers(cfg.sampler, problem)
     prior = cfg.prior if isinstance(cfg.prior, str) else prior_record(cfg.prior)
     key = {"parameters": list(problem.names), "flights": flights, "markers": cfg.markers, "prior": prior,
-           "sampler": settings}
+           "initial_conditions": cfg.ic_prior, "sampler": settings}
     noise = noise_info(problem)
     if any(d["model"] != "gaussian" or d["per_point"] for d in noise.values()):
         key["noise"] = noise                       # only when not the plain model: older runs still resume
@@ -258,7 +264,8 @@ def _average_over_judgement(raw, problem, chains, cfg: RunConfig, out: Path) -> 
                      "weights not trusted; see ") + str(out / JUDGEMENT_AVERAGE))
 
 
-def posterior_approximation(problem, ls, processes: int, out: Path, progress: bool = False, max_nfev: int = 200):
+def posterior_approximation(problem, ls, processes: int, out: Path, progress: bool = False, max_nfev: int = 200,
+                            with_prior=None):
     """Profile paths of the coefficients through the least-squares optimum and the ridge-aware
     independence proposal built from them (:func:`bayes_disc.inference.sampling.proposals.independence_proposal`).
 
@@ -281,6 +288,10 @@ def posterior_approximation(problem, ls, processes: int, out: Path, progress: bo
         A bar over the coefficients (on a terminal); otherwise a log line per finished profile.
     max_nfev : int
         Evaluation budget of each least-squares refinement round after a lower point.
+    with_prior : callable, optional
+        ``with_prior(problem, ls) -> problem``: the problem whose posterior the proposal is built for, from the
+        optimum the profiles went through (the initial conditions' reference prior,
+        :func:`initial_condition_prior`); default: ``problem`` as given.
 
     Returns
     -------
@@ -318,7 +329,8 @@ def posterior_approximation(problem, ls, processes: int, out: Path, progress: bo
             logger.warning(f"the profiles of {', '.join(below)} still reach below the least-squares optimum after "
                            f"{MAX_LOWER_REFITS} refits from lower points: the posterior has several modes close in "
                            "cost (the profiles and the proposal built on them include those points)")
-        proposal = independence_proposal(problem, ls.theta, ls.cov, paths)
+        target = problem if with_prior is None else with_prior(problem, ls)
+        proposal = independence_proposal(target, ls.theta, ls.cov, paths)
         record = {}
         for path in paths:
             dep = path_departure(path, ls.theta, ls.cov)
@@ -332,6 +344,63 @@ def posterior_approximation(problem, ls, processes: int, out: Path, progress: bo
         st.result = (refits + (f"non-Gaussian along {', '.join(ridge)}; " if ridge else "all close to Gaussian; ")
                      + f"{len(proposal.parts) - 1} ridge proposal(s)")
     return proposal, ls
+
+
+def initial_condition_prior(problem, ls, cfg: RunConfig, out: Path, resume: bool):
+    """The problem with the initial conditions' prior of ``prior.initial_conditions``: for ``reference`` the
+    conditional reference prior's surrogate (:func:`bayes_disc.inference.fitting.reference.build_ic_reference`),
+    built and written to ``ic_reference.json``, or read back from it on resume; for ``flat`` the problem as is.
+
+    Parameters
+    ----------
+    problem : Problem
+        The problem sampled.
+    ls : LeastSquaresResult or None
+        Its least-squares optimum (None on resume).
+    cfg : RunConfig
+    out : Path
+        The run folder.
+    resume : bool
+        Read the saved surrogate instead of building it.
+
+    Returns
+    -------
+    problem : Problem
+    record : dict
+        summary.json's ``initial_condition_prior``: ``initial_conditions`` and, for ``reference``, the
+        surrogate's accuracy at held-out points and the file.
+
+    Raises
+    ------
+    ConfigError
+        On resume of a ``reference`` run whose ``ic_reference.json`` is missing.
+    """
+    if cfg.ic_prior == "flat":
+        return problem, {"initial_conditions": "flat",
+                         "description": "independent wide Gaussians around the data-derived starts"}
+    path = out / IC_REFERENCE
+    if resume:
+        if not path.is_file():
+            raise ConfigError(cfg.path, "prior.initial_conditions", f"cannot resume: {path} is missing, so the "
+                              "reference prior the chains were sampled with is unknown (run without --resume)")
+        surrogate = surrogate_from_dict(json.loads(path.read_text()))
+    else:
+        with stage("reference prior", "the initial conditions' conditional reference prior at design points of "
+                                      "the coefficients") as st:
+            surrogate = build_ic_reference(problem, ls, cfg.sampler.seed)
+            path.write_text(json.dumps(surrogate.to_dict(), indent=1))
+            a = surrogate.accuracy
+            if a["rms_error"] > POOR_SURROGATE * a["sd_exact"]:
+                logger.warning(f"the reference prior's surrogate is off the exact value by {a['rms_error']:.2f} nats "
+                               f"rms at held-out points, where the value varies by {a['sd_exact']:.2f}: the "
+                               "coefficients' marginal follows the profile only roughly (weakly informative flights)")
+            st.result = (f"surrogate within {a['rms_error']:.2f} nats rms ({a['max_error']:.2f} max) of the exact "
+                         f"value at {a['points']} held-out points, where it varies by {a['sd_exact']:.2f} (sd)")
+    return problem.with_ic_reference(surrogate), {
+        "initial_conditions": "reference",
+        "description": "wide Gaussians around the data-derived starts times the conditional reference prior "
+                       "|I_xx,f(c)|^(1/2) of every flight's initial conditions given the coefficients",
+        "surrogate_accuracy": dict(surrogate.accuracy), "file": IC_REFERENCE}
 
 
 def _resume_message(name: str, steps: list) -> str:
@@ -366,7 +435,8 @@ def _prepare_sampling(cfg: RunConfig, problem, out: Path, resume: bool, progress
     """Before sampling: on resume, the saved chains' step counts and least squares (the proposals are saved
     with the chains); otherwise least squares, the choice of noise models, the robust fit, the profiles and
     their proposal. Returns (problem as read with its noise models, problem sampled (robust flights
-    cleaned), least-squares record, proposal or None, saved steps or None)."""
+    cleaned, with the initial conditions' prior), least-squares record, proposal or None, saved steps or None,
+    summary.json's ``initial_condition_prior``)."""
     if resume and (out / "chains" / RUN_KEY).is_file():
         check_same_run(cfg, problem, out)       # before counting chain files: the ensembles may differ
     steps = saved_steps(out, cfg.sampler.ensembles) if resume else None
@@ -383,24 +453,32 @@ def _prepare_sampling(cfg: RunConfig, problem, out: Path, resume: bool, progress
         else:
             logger.info(f"resume: reusing the saved least-squares optimum (cost {ls_dict['cost']:.1f}) and the "
                         "proposals saved with the chains")
-        return None, problem, ls_dict, None, steps    # the sampler continues with the approximation saved beside its chains
+        problem, ic = initial_condition_prior(problem, None, cfg, out, resume=True)
+        return None, problem, ls_dict, None, steps, ic    # the sampler continues with the approximation saved beside its chains
     ls, ls_dict = _least_squares(problem, cfg, out)
     problem, ls, ls_dict = _noise_choice(problem, ls, ls_dict, cfg, out)
     raw = problem
     problem, ls, ls_dict = _robust(problem, ls, ls_dict, cfg, out)
+    chosen = {}
+
+    def with_prior(p, optimum):
+        chosen["problem"], chosen["ic"] = initial_condition_prior(p, optimum, cfg, out, resume=False)
+        return chosen["problem"]
     proposal, ls = posterior_approximation(problem, ls, cfg.sampler.processes, out, progress=progress,
-                                           max_nfev=cfg.least_squares.max_nfev)
+                                           max_nfev=cfg.least_squares.max_nfev, with_prior=with_prior)
+    problem, ic = chosen["problem"], chosen["ic"]
     (out / "chains").mkdir(exist_ok=True)
     (out / "chains" / RUN_KEY).write_text(json.dumps(run_key(cfg, problem), indent=1))
-    return raw, problem, ls.to_dict(), proposal, None
+    return raw, problem, ls.to_dict(), proposal, None, ic
 
 
-def _write_outputs(cfg: RunConfig, problem, chains, ls_dict: dict, throws, steps, out: Path, t0: float):
+def _write_outputs(cfg: RunConfig, problem, chains, ls_dict: dict, throws, steps, out: Path, t0: float, ic: dict):
     """The "outputs" stage: summary.json, posterior.nc and run_info.json (its history of sampling sessions
     extended on resume). Returns (summary, run_info)."""
     with stage("outputs", "summary.json, posterior.nc, run_info.json"):
         info = {"name": cfg.name, "config": str(cfg.path), "flights": flight_info(problem),
-                "sampler_settings": asdict(cfg.sampler), "markers": cfg.markers, "noise": noise_info(problem)}
+                "sampler_settings": asdict(cfg.sampler), "markers": cfg.markers, "noise": noise_info(problem),
+                "initial_condition_prior": ic}
         if (out / NOISE_CHOICE).is_file():
             info["noise_choice"] = json.loads((out / NOISE_CHOICE).read_text())
         if (out / FLAGGED).is_file() and robust_flights(problem):
@@ -455,7 +533,7 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
     out = Path(cfg.output)
     out.mkdir(parents=True, exist_ok=True)
     throws, raw, problem = _read_problem(cfg, out, resume)
-    chosen, problem, ls_dict, proposal, steps = _prepare_sampling(cfg, problem, out, resume, progress)
+    chosen, problem, ls_dict, proposal, steps, ic = _prepare_sampling(cfg, problem, out, resume, progress)
     raw = raw if chosen is None else chosen
     s = cfg.sampler
     with stage("sampling", f"{s.ensembles} ensembles × {n_walkers(s, problem)} walkers until R-hat < {s.rhat:g}, "
@@ -464,7 +542,7 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
         st.result = f"{chains.reason} at step {chains.total_steps}"
     if robust_flights(raw):
         _average_over_judgement(raw, problem, chains, cfg, out)
-    summary, run_info = _write_outputs(cfg, problem, chains, ls_dict, throws, steps, out, t0)
+    summary, run_info = _write_outputs(cfg, problem, chains, ls_dict, throws, steps, out, t0, ic)
     logger.info(format_table(summary), extra=RESULT)
     c = summary["convergence"]
     logger.info(f"{c['reason']}: {c['total_steps']} steps × {c['walkers_per_ensemble']} walkers × {c['ensembles']} "

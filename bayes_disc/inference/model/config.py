@@ -19,6 +19,8 @@ sampler:                 # emcee settings
   seed: 1
   processes: 2           # ensembles run in parallel processes
 least_squares: {starts: 4, max_nfev: 200}
+prior: {coefficients: potts_crowther, initial_conditions: reference}   # or a name, or {around: ...};
+                                         # initial_conditions: reference | flat (.priors)
 simulator: {method: vern7, step_factor: null}   # Runge–Kutta tableau and step factor (kernel defaults)
 physics: {side_force: {CY: 0.0}}        # extra terms (physics.TERMS) and data explanations
                                          # (marker_geometry, time_offset); values are starting guesses
@@ -47,7 +49,7 @@ from ...observation.config_blocks import read_disc_env, read_markers, read_physi
 from ...observation.models.noise import NOISE_MODELS, PER_POINT
 from ...physics import COEFFICIENT_NAMES, LITERATURE, Disc, Environment, literature_coefficients
 from ...physics.kernel import DEFAULT_METHOD, TABLEAUX
-from .priors import CoefficientPrior, prior_around
+from .priors import IC_PRIOR_DEFAULT, IC_PRIORS, CoefficientPrior, prior_around
 
 PRIORS = ("potts_crowther", "weak")
 #: ``noise.model: auto``: each flight's marker noise model chosen by evidence
@@ -111,12 +113,16 @@ class ImuSource:
 
 
 
-def read_prior(path: Path, sec: Section) -> "str | CoefficientPrior":
-    """The ``prior`` key: a named set (``potts_crowther``, ``weak``) or Gaussians around values.
+def read_prior(path: Path, sec: Section) -> "tuple[str | CoefficientPrior, str]":
+    """The ``prior`` key: the coefficients' prior and the initial conditions'.
 
+    ``prior: potts_crowther`` (or ``weak``): a named coefficient set. As a mapping:
+    ``prior: {coefficients: weak, initial_conditions: flat}``, or Gaussians around values,
     ``prior: {around: hummel2002, relative_sd: 0.1, sd: {CNr: 1e-5}}`` — ``around`` a literature key
     (``physics.LITERATURE``) or a mapping {coefficient: value} of all ten; sd = relative_sd·|value| unless
-    given under ``sd`` (:func:`.priors.prior_around`).
+    given under ``sd`` (:func:`.priors.prior_around`). ``initial_conditions`` (:data:`.priors.IC_PRIORS`, default
+    :data:`.priors.IC_PRIOR_DEFAULT`): ``reference`` adds the conditional reference prior of every flight's
+    initial conditions given the coefficients, ``flat`` leaves their wide Gaussians alone (:mod:`.priors`).
 
     Parameters
     ----------
@@ -127,8 +133,10 @@ def read_prior(path: Path, sec: Section) -> "str | CoefficientPrior":
 
     Returns
     -------
-    str or CoefficientPrior
+    coefficients : str or CoefficientPrior
         The name of a named set, or the ``around`` prior.
+    initial_conditions : str
+        ``reference`` or ``flat``.
 
     Raises
     ------
@@ -137,8 +145,15 @@ def read_prior(path: Path, sec: Section) -> "str | CoefficientPrior":
     """
     raw = sec.raw("prior", "potts_crowther")
     if not isinstance(raw, dict):
-        return sec.string("prior", "potts_crowther", choices=PRIORS)
+        return sec.string("prior", "potts_crowther", choices=PRIORS), IC_PRIOR_DEFAULT
     p = sec.section("prior")
+    ic = p.string("initial_conditions", IC_PRIOR_DEFAULT, choices=IC_PRIORS)
+    if not p.has("around"):
+        named = p.string("coefficients", "potts_crowther", choices=PRIORS)
+        p.finish()
+        return named, ic
+    if p.has("coefficients"):
+        raise ConfigError(path, p.key("coefficients"), "give either a named set (coefficients) or around, not both")
     around = p.raw("around", required=True)
     if isinstance(around, str):
         if around not in LITERATURE:
@@ -155,7 +170,7 @@ def read_prior(path: Path, sec: Section) -> "str | CoefficientPrior":
     w.finish()
     p.finish()
     try:
-        return prior_around(values, rel, given, label=label)
+        return prior_around(values, rel, given, label=label), ic
     except ValueError as e:
         raise ConfigError(path, "prior", str(e)) from None
 
@@ -171,6 +186,7 @@ class RunConfig:
     disc: Disc = Disc()
     env: Environment = Environment()
     prior: "str | CoefficientPrior" = "potts_crowther"
+    ic_prior: str = IC_PRIOR_DEFAULT              # prior.initial_conditions: reference | flat (.priors)
     output: Path = Path("runs/run")
     sampler: SamplerSettings = SamplerSettings()
     least_squares: LeastSquaresSettings = LeastSquaresSettings()
@@ -287,7 +303,7 @@ def config_from_mapping(data: dict, path, output_override=None) -> RunConfig:
         files.append(file)
     markers = read_markers(path, sec) if files or "markers" in sec.data else {}
     disc, env = read_disc_env(path, sec)
-    prior = read_prior(path, sec)
+    prior, ic_prior = read_prior(path, sec)
     out = sec.string("output", None)
     output = (path.parent / out) if out else Path.cwd() / "runs" / name
     if output_override is not None:
@@ -338,7 +354,7 @@ def config_from_mapping(data: dict, path, output_override=None) -> RunConfig:
         raise ConfigError(path, "truth", f"file not found: {truth_path}")
     sec.finish()
     return RunConfig(path=path, name=name, files=tuple(files), markers=markers, disc=disc, env=env, prior=prior,
-                     output=output, sampler=sampler, least_squares=least, simulator_method=method,
+                     ic_prior=ic_prior, output=output, sampler=sampler, least_squares=least, simulator_method=method,
                      simulator_step_factor=step, physics=physics, flight_options=flight_options, truth=truth_path,
                      imu=imu, credit=credit, noise=noise)
 

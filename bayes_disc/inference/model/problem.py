@@ -32,7 +32,7 @@ from ...observation.models import MarkerPositions, ObservationModel
 from ...physics import COEFFICIENT_NAMES, Disc, Environment, SimulatorSettings, Term, flight_conditions, simulate
 from ...physics.frames import matrix_to_quat, quat_from_rotvec, quat_multiply, quat_to_matrix, quat_to_rotvec
 from .layout import FULL_IC, IC_NAMES, INERTIAL_IC, ParameterLayout
-from .priors import coefficient_prior
+from .priors import ReferenceSurrogate, coefficient_prior
 
 #: body→world rotation of the level right-side-up disc (b1 along x, b3 down): the inertial ICs' reference
 R_LEVEL = np.diag([1.0, -1.0, -1.0])
@@ -103,6 +103,10 @@ class Problem:
         no marker model gets the ``inertial`` initial conditions (:mod:`.layout`).
     own_start : list of arrays, optional
         Per flight, starting values of its own observation-model parameters (default: their off values).
+    ic_reference : ReferenceSurrogate, optional
+        The conditional reference prior of the initial conditions (:mod:`.priors`): its log-density g̃(c) of
+        the coefficients is added to :meth:`log_prior`; None (default): the wide Gaussians alone. A problem
+        derived for other flights or data (:meth:`subset`, :meth:`with_marker_data` …) does not carry it.
     """
 
     flights: list[FlightObservation]
@@ -119,6 +123,7 @@ class Problem:
     kernel_terms: tuple[Term, ...] = ()
     observations: list[tuple[ObservationModel, ...]] | None = None
     own_start: list[np.ndarray] | None = None
+    ic_reference: ReferenceSurrogate | None = None
 
     def __post_init__(self):
         if len(self.start_states) != len(self.flights):
@@ -338,9 +343,19 @@ class Problem:
         return mean, sd
 
     def log_prior(self, theta: np.ndarray) -> np.ndarray:
+        """(B,) log-prior of θ (B, dim), up to a constant: the independent Gaussians, plus the conditional
+        reference prior's g̃(c) of the coefficients when the problem carries one (:attr:`ic_reference`)."""
         theta = np.atleast_2d(theta)
         z = (theta - self.prior_mean) / self.prior_sd
-        return -0.5 * np.sum(z * z, axis=1)
+        out = -0.5 * np.sum(z * z, axis=1)
+        if self.ic_reference is not None:
+            out = out + self.ic_reference(theta[:, : self.n_coef])
+        return out
+
+    def with_ic_reference(self, surrogate: ReferenceSurrogate | None) -> "Problem":
+        """The same problem with the conditional reference prior ``surrogate`` (None: without one)."""
+        from dataclasses import replace
+        return replace(self, ic_reference=surrogate)
 
     def sample_prior(self, n: int, rng: np.random.Generator) -> np.ndarray:
         return self.prior_mean + self.prior_sd * rng.standard_normal((n, self.dim))

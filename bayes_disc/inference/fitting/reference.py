@@ -1,0 +1,185 @@
+"""The conditional reference prior of the initial conditions, computed: exact values of its log-density
+g(c) = ½ Σ_f ln det I_xx,f(c, x̂_f(c)) and the quadratic surrogate the log-posterior adds
+(:mod:`bayes_disc.inference.model.priors` says why).
+
+At coefficients c every other parameter is refitted with c held (:func:`conditional_optimum`: the flights'
+initial conditions, their observation-model parameters and any other shared ones, one Levenberg–Marquardt fit
+from the least-squares covariance's linear prediction, :func:`.profile.conditional_start`); there the
+Jacobian of every flight's residuals over its own initial conditions (whitened with the least-squares noise
+scales, one batched simulation per flight) gives I_xx,f = J_fᵀ J_f (the block-arrow structure hands each
+flight's block out directly, :mod:`.arrow`). The initial conditions' wide Gaussian priors are not part of
+I_xx,f: the reference prior is the data's information.
+
+:func:`build_ic_reference` computes g at a design of coefficient points in the least-squares metric
+(:func:`.priors.reference_design`), fits the quadratic and measures it at held-out points drawn as the
+random design points are.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ..model.priors import ReferenceSurrogate, fit_reference_surrogate, reference_design, surrogate_accuracy
+from ..model.problem import Problem
+from .leastsq import LeastSquaresResult
+from .minimiser import MU_NEAR, minimise
+from .profile import DEVIANCE_TOL
+from .residuals import jacobian_blocks, whitened_costs
+
+#: design points along every whitened axis at these distances (least-squares sds) ...
+AXIS_RADII = (3.0, 6.0)
+#: ... and this many random points of N(0, RANDOM_SPREAD² I) (a posterior up to 1.3 times as wide as the
+#: least-squares one); as many held-out points again check the fit (:data:`HELD_OUT`)
+RANDOM_POINTS = 120
+RANDOM_SPREAD = 1.3
+#: held-out points drawn like the random design points
+HELD_OUT = 30
+#: trust radius of the surrogate (whitened units): beyond the farthest design points it stays at its value
+#: on this sphere (:class:`.priors.ReferenceSurrogate`)
+TRUST_RADIUS = 6.0
+#: evaluation budget of one conditional fit (they start next to their optimum and take 2–4 Jacobians)
+CONDITIONAL_NFEV = 40
+#: design and held-out points whose conditional optimum lies this far above the least-squares optimum (profile
+#: deviance 2 Δcost) are left out of the fit and of the check: the posterior has no mass there (e^(−30) of the
+#: optimum's density), and the simulations of such coefficients may fail (the demo, 6 sds down the
+#: pitching-moment axis: a flight that cannot be simulated)
+MAX_DESIGN_DEVIANCE = 60.0
+
+
+def ic_log_determinants(problem: Problem, theta: np.ndarray, sigma: np.ndarray) -> np.ndarray:
+    """½ ln det I_xx,f at θ for every flight f: I_xx,f = J_fᵀ J_f over its initial conditions.
+
+    Parameters
+    ----------
+    problem : Problem
+    theta : (dim,) array
+    sigma : (n_groups,) array
+        Noise scale per group (whitens the residuals).
+
+    Returns
+    -------
+    (n_flights,) array
+        [nats]; −inf for a flight whose initial conditions are not all informed (a singular block).
+    """
+    free = np.zeros(problem.dim, bool)
+    for k in range(problem.n_flights):
+        free[problem.ic_slice(k)] = True
+    J = jacobian_blocks(theta, problem, sigma, free)
+    out = np.empty(problem.n_flights)
+    for k, block in enumerate(J.blocks):
+        info = block.T @ block                  # the block has no shared columns: only its own
+        d = np.sqrt(np.diag(info))
+        if not np.all(d > 0):
+            out[k] = -np.inf
+            continue
+        sign, log_det = np.linalg.slogdet(info / np.outer(d, d))
+        out[k] = 0.5 * (log_det + 2.0 * np.sum(np.log(d))) if sign > 0 else -np.inf
+    return out
+
+
+def conditional_optimum(problem: Problem, ls: LeastSquaresResult, c: np.ndarray) -> np.ndarray:
+    """θ with the coefficients at ``c`` and every other parameter at its optimum given them.
+
+    Parameters
+    ----------
+    problem : Problem
+    ls : LeastSquaresResult
+        The least-squares optimum, its noise scales (held) and covariance (for the start).
+    c : (n_coef,) array
+        The coefficients.
+
+    Returns
+    -------
+    (dim,) array
+
+    Raises
+    ------
+    RuntimeError
+        The fit failed (no step lowered the cost, or no positive-definite damped system); a fit stopped by its
+        budget (:data:`CONDITIONAL_NFEV`) is used where it stopped, next to the optimum (the held-out check of
+        :func:`build_ic_reference` measures the result).
+    """
+    n = problem.n_coef
+    S = ls.cov[:n, :n]
+    start = ls.theta + ls.cov[:, :n] @ np.linalg.solve(S, c - ls.theta[:n])
+    start[:n] = c
+    held = ls.theta.copy()
+    held[:n] = c
+    x0 = min((start, held), key=lambda x: float(whitened_costs(x, problem, ls.sigma)[0]))
+    free = np.ones(problem.dim, bool)
+    free[:n] = False
+    cost0 = max(float(ls.cost), 1e-300)
+    res = minimise(problem, x0, ls.sigma, free=free, max_nfev=CONDITIONAL_NFEV, mu0=MU_NEAR,
+                   ftol=0.5 * DEVIANCE_TOL / cost0, dtol=0.25 * DEVIANCE_TOL)
+    if res.status < 0:
+        raise RuntimeError(f"the conditional fit at c = {np.round(c, 5).tolist()} failed: {res.message}")
+    return res.x
+
+
+def exact_log_reference(problem: Problem, ls: LeastSquaresResult, c: np.ndarray) -> tuple[float, float]:
+    """g(c) = ½ Σ_f ln det I_xx,f(c, x̂_f(c)) [nats]: the conditional reference prior's log-density at the
+    coefficients ``c`` (n_coef,), computed exactly (:func:`conditional_optimum`, :func:`ic_log_determinants`),
+    and the profile deviance 2 [cost(c, x̂(c)) − cost(θ̂)] there (noise scales held at the least squares').
+
+    Returns
+    -------
+    g : float
+        −inf where a flight's block is singular.
+    deviance : float
+    """
+    x = conditional_optimum(problem, ls, c)
+    deviance = 2.0 * (float(whitened_costs(x, problem, ls.sigma)[0]) - float(ls.cost))
+    return float(np.sum(ic_log_determinants(problem, x, ls.sigma))), deviance
+
+
+def build_ic_reference(problem: Problem, ls: LeastSquaresResult, seed: int, progress=None) -> ReferenceSurrogate:
+    """The quadratic surrogate of g fitted to exact values at a design of coefficient points and measured at
+    held-out ones (module docstring).
+
+    Parameters
+    ----------
+    problem : Problem
+    ls : LeastSquaresResult
+        The least-squares optimum: the design is centred on it and scaled by its coefficients' covariance.
+    seed : int
+        Seed of the random design and held-out points.
+    progress : callable, optional
+        ``progress(done, total)`` after each exact value.
+
+    Returns
+    -------
+    ReferenceSurrogate
+        ``accuracy``: :func:`.priors.surrogate_accuracy` at the held-out points, with ``design_points`` (fitted)
+        and ``left_out`` (design and held-out points beyond :data:`MAX_DESIGN_DEVIANCE`).
+
+    Raises
+    ------
+    RuntimeError
+        A conditional fit failed, or g is not finite at a point within :data:`MAX_DESIGN_DEVIANCE` (a flight
+        whose initial conditions the data do not all inform there).
+    ValueError
+        The points left do not fix the quadratic (:func:`.priors.fit_reference_surrogate`).
+    """
+    n = problem.n_coef
+    rng = np.random.default_rng([seed, 7411])
+    S = ls.cov[:n, :n]
+    L = np.linalg.cholesky(S)
+    design = reference_design(n, AXIS_RADII, RANDOM_POINTS, RANDOM_SPREAD, rng)
+    held = RANDOM_SPREAD * rng.standard_normal((HELD_OUT, n))
+    points = ls.theta[:n] + np.vstack([design, held]) @ L.T
+    values, deviance = np.empty(len(points)), np.empty(len(points))
+    for j, c in enumerate(points):
+        values[j], deviance[j] = exact_log_reference(problem, ls, c)
+        if progress is not None:
+            progress(j + 1, len(points))
+    keep = deviance <= MAX_DESIGN_DEVIANCE
+    if not np.all(np.isfinite(values[keep])):
+        raise RuntimeError("the initial conditions' information is singular at some design points: the "
+                           "reference prior is undefined there")
+    fit = keep & (np.arange(len(points)) < len(design))
+    check = keep & ~fit & (np.arange(len(points)) >= len(design))
+    surrogate = fit_reference_surrogate(points[fit], values[fit], ls.theta[:n], S, TRUST_RADIUS)
+    accuracy = {**surrogate_accuracy(surrogate, points[check], values[check]), "design_points": int(fit.sum()),
+                "left_out": int((~keep).sum())}
+    return replace(surrogate, accuracy=accuracy)
