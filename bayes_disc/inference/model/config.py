@@ -19,8 +19,8 @@ sampler:                 # emcee settings
   seed: 1
   processes: 2           # ensembles run in parallel processes
 least_squares: {starts: 4, max_nfev: 200}
-prior: {coefficients: potts_crowther, initial_conditions: reference}   # or a name, or {around: ...};
-                                         # initial_conditions: reference | flat (.priors)
+prior: {coefficients: potts_crowther, initial_conditions: flat}   # or a name, or {around: ...};
+                                         # initial_conditions: flat | reference (.priors)
 simulator: {method: vern7, step_factor: null}   # Runge–Kutta tableau and step factor (kernel defaults)
 physics: {side_force: {CY: 0.0}}        # extra terms (physics.TERMS) and data explanations
                                          # (marker_geometry, time_offset); values are starting guesses
