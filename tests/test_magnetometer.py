@@ -203,3 +203,12 @@ def test_least_squares_recovers_the_row_period_and_the_field():
     noise = ls.noise()
     for l in LAUNCHES:
         assert noise[f"sigma_mag_transverse_{l.name}"]["value"] < 0.5
+
+
+def test_every_inertial_series_has_words_for_the_diagnosis():
+    """The diagnosis names structured residual series in words; every series an inertial unit with its
+    magnetometer can produce has them (a missing one stopped `diagnose` at its last step)."""
+    from bayes_disc.diagnostics.mismatch import SERIES_WORDS
+    from bayes_disc.observation.models.inertial import SERIES
+    from bayes_disc.observation.models.magnetometer import MAG_SERIES
+    assert set(SERIES + MAG_SERIES) <= set(SERIES_WORDS)

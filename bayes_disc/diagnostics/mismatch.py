@@ -240,7 +240,9 @@ SERIES_WORDS = {"along": "along-track", "lateral": "lateral", "normal": "vertica
                 "spin_phase": "spin phase (about d3)",
                 "gyro_x": "gyro x (sensor axis)", "gyro_y": "gyro y (sensor axis)", "gyro_z": "gyro z (spin axis)",
                 "acc_x": "accelerometer x (sensor axis)", "acc_y": "accelerometer y (sensor axis)",
-                "acc_z": "accelerometer z (disc normal)"}
+                "acc_z": "accelerometer z (disc normal)",
+                "mag_x": "magnetometer x (sensor axis)", "mag_y": "magnetometer y (sensor axis)",
+                "mag_z": "magnetometer z (disc normal)"}
 
 
 def describe_where(fp: dict, n_flights: int) -> str:
