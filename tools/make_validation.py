@@ -507,11 +507,11 @@ def section_real() -> list[str]:
                  f"{'white' if ld.get('white') else 'structured'}." if ld else
                  "the learned correction was not run (`--no-learn`)."), ""]
     crow = [[c["id"], f"{c['evidence']:.0f}", fmt(c.get("share_explained")), c["status"],
-             ", ".join(f"{f.split('-')[-2]}-{f.split('-')[-1]} {g:+.0f}" for f, g in (c.get("per_flight_gain") or {}).items())]
+             ", ".join(f"{f.split('-')[-2]}-{f.split('-')[-1]} " + f"{g:+.0f}".replace("-", "−") for f, g in (c.get("per_flight_gain") or {}).items())]
             for c in cands[:6]]
     L += table(["candidate", "ΔBIC", "share of the excess removed", "status", "gain per throw"], crow)
     L += [""]
-    far = min(ratios) if ratios else float("nan")
+    far = max(ratios) if ratios else float("nan")
     L += [f"Verdict: **the misfit is far above the sensor noise** — every sensor group's fitted σ is "
           f"{min(ratios):.1f}–{max(ratios):.1f}× its noise floor, and the transverse gyro misfit is "
           f"{min(vs_axial):.0f}–{max(vs_axial):.0f}× the same gyro's axial noise floor — "
@@ -520,7 +520,8 @@ def section_real() -> list[str]:
           + (f"{len(opposite)} of 10 coefficients ({', '.join(opposite)}) have a 90 % interval of the opposite sign to "
              f"every published value. " if opposite else "")
           + "The coefficients from these throws are **not findings**: the model lacks the physics of this "
-            "instrumented disc." if far > 1.5 else
+            "instrumented disc, and an inertial log does not determine the airspeed the coefficients scale with "
+            "(identifiability section)." if far > 1.5 else
           f"Verdict: the misfit is within {max(ratios):.1f}× the noise floor.", "",
           f"Reproduce (the committed runs took {load('runs/flatball/out/run_info.json')['wall_time_s'] / 60:.0f} min "
           f"for `sample` and {diag['wall_time_s'] / 60:.0f} min for `diagnose` on two shared cores): "
