@@ -116,6 +116,15 @@ def _unit_air(ctx):
 
 
 @nb.njit(inline="always", cache=True)
+def _d_frame_moment(roll, pitch, ctx):
+    """(0, 0, 0, M): no force and the world-frame moment M = roll d1 + pitch d2 [N m]."""
+    return (0.0, 0.0, 0.0,
+            roll * ctx[CTX_D1X] + pitch * ctx[CTX_D2X],
+            roll * ctx[CTX_D1Y] + pitch * ctx[CTX_D2Y],
+            roll * ctx[CTX_D1Z] + pitch * ctx[CTX_D2Z])
+
+
+@nb.njit(inline="always", cache=True)
 def _lift_direction(ctx):
     """d2 × v̂_a (world): the lift direction of docs/conventions.md (perpendicular to v_a, toward the top side)."""
     ax, ay, az = _unit_air(ctx)
@@ -345,10 +354,7 @@ def _rate_coupling_loads(E, off, b, ctx):
     qad = ctx[CTX_Q] * ctx[CTX_AREA] * ctx[CTX_DIAM]
     roll = E[off + 1, b] * ctx[CTX_QRATE] * qad
     pitch = E[off, b] * ctx[CTX_P] * qad
-    return (0.0, 0.0, 0.0,
-            roll * ctx[CTX_D1X] + pitch * ctx[CTX_D2X],
-            roll * ctx[CTX_D1Y] + pitch * ctx[CTX_D2Y],
-            roll * ctx[CTX_D1Z] + pitch * ctx[CTX_D2Z])
+    return _d_frame_moment(roll, pitch, ctx)
 
 
 RATE_COUPLING = Term(
@@ -386,10 +392,7 @@ def _rate_damping_loads(E, off, b, ctx):
     """ΔM = (C_wα α + C_ww |ω⊥|) (p d1 + q d2) Q A d,  |ω⊥| = √(p² + q²) (:data:`RATE_DAMPING`)."""
     p, q = ctx[CTX_P], ctx[CTX_QRATE]
     c = (E[off, b] * ctx[CTX_ALPHA] + E[off + 1, b] * math.sqrt(p * p + q * q)) * ctx[CTX_Q] * ctx[CTX_AREA] * ctx[CTX_DIAM]
-    return (0.0, 0.0, 0.0,
-            c * (p * ctx[CTX_D1X] + q * ctx[CTX_D2X]),
-            c * (p * ctx[CTX_D1Y] + q * ctx[CTX_D2Y]),
-            c * (p * ctx[CTX_D1Z] + q * ctx[CTX_D2Z]))
+    return _d_frame_moment(c * p, c * q, ctx)
 
 
 RATE_DAMPING = Term(
@@ -423,10 +426,7 @@ def _disc_asymmetry_loads(E, off, b, ctx):
     qad = ctx[CTX_Q] * ctx[CTX_AREA] * ctx[CTX_DIAM]
     roll = (E[off, b] * cos2 + E[off + 1, b] * sin2) * qad
     pitch = (E[off + 1, b] * cos2 - E[off, b] * sin2) * qad
-    return (0.0, 0.0, 0.0,
-            roll * ctx[CTX_D1X] + pitch * ctx[CTX_D2X],
-            roll * ctx[CTX_D1Y] + pitch * ctx[CTX_D2Y],
-            roll * ctx[CTX_D1Z] + pitch * ctx[CTX_D2Z])
+    return _d_frame_moment(roll, pitch, ctx)
 
 
 DISC_ASYMMETRY = Term(
