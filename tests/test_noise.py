@@ -255,6 +255,30 @@ def test_least_squares_estimates_rho_of_ar1_noise(clean):
     assert "rho_a" not in white.names
 
 
+def test_jacobian_at_the_edge_of_rho_is_one_sided_and_finite(clean):
+    """ρ half a finite-difference step below 1: the lane beyond 1 has no likelihood (non-finite residuals), so
+    ρ's column is the backward difference, and every other column stays central."""
+    noisy = with_ar1_noise(clean, rho=0.99)
+    problem = _problem(noisy, noise_model="ar1")
+    i = problem.names.index("rho_a")
+    x = _fit(problem).theta.copy()
+    h = 1e-4 * problem.prior_sd[i]
+    x[i] = 1.0 - 0.5 * h
+    sigma = np.ones(problem.n_groups)
+    J = jacobian_blocks(x, problem, sigma)
+    assert all(np.all(np.isfinite(b)) for b in J.blocks)
+    below = x.copy()
+    below[i] -= h
+    r0, r1 = problem.noise_residuals(x, 0)[0][0], problem.noise_residuals(below, 0)[0][0]
+    np.testing.assert_allclose(J.blocks[0][:, -1], (r0 - r1) / h, rtol=1e-9, atol=0)   # ρ: the last own column
+    hc = 1e-4 * problem.prior_sd[0]
+    up, down = x.copy(), x.copy()
+    up[0] += hc
+    down[0] -= hc
+    central = (problem.noise_residuals(up, 0)[0][0] - problem.noise_residuals(down, 0)[0][0]) / (2 * hc)
+    np.testing.assert_allclose(J.blocks[0][:, 0], central, rtol=1e-9, atol=0)          # CL0: central
+
+
 def test_per_point_errors_weight_the_fit(clean):
     """10× noise on the second half of the flight: with sigma_m the scale factor is ≈ 1 and the fit's
     coefficient uncertainties are smaller, overall, than with one σ for the flight (a coefficient pinned by its

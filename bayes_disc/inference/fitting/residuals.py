@@ -39,12 +39,16 @@ def _flight_columns(x: np.ndarray, problem: Problem, sigma: np.ndarray, k: int, 
     Returns
     -------
     d : (c, n_k) array
-        Central differences (a column whose lanes' simulation failed is zero).
+        Central differences; a one-sided difference where the lane on the other side failed (a parameter
+        at the edge of its domain: AR(1)'s ρ a step from 1); zero where both failed, or one did and the
+        centre's simulation failed too.
     bend, slope : (c,) arrays
-        |d⁺ − d⁻|² and |d⁺ + d⁻|²/4 summed over the rows, d± the one-sided differences (zero for a failed
-        column, or where the centre's simulation failed).
+        |d⁺ − d⁻|² and |d⁺ + d⁻|²/4 summed over the rows, d± the one-sided differences (zero unless both
+        lanes and the centre succeeded).
     centre : (n_k,) array or None
         The residuals at x (None if that simulation failed).
+
+    A lane fails when its simulation does or any of its residuals is not finite.
     """
     w = sigma[problem.residual_groups(k)]
     if cols.size == 0:
@@ -53,15 +57,19 @@ def _flight_columns(x: np.ndarray, problem: Problem, sigma: np.ndarray, k: int, 
     lanes[np.arange(cols.size), cols] += h
     lanes[cols.size + np.arange(cols.size), cols] -= h
     r, ok = problem.noise_residuals(lanes, k)
+    ok = ok & np.all(np.isfinite(r), axis=1)
     if centre is None:
         centre = r[-1] if ok[-1] else None
     plus, minus = r[: cols.size], r[cols.size: 2 * cols.size]
-    good = ok[: cols.size] & ok[cols.size: 2 * cols.size]
-    d = (plus - minus) / (2 * h)[:, None] / w
-    d[~good] = 0.0
+    up, down = ok[: cols.size], ok[cols.size: 2 * cols.size]
+    good = up & down
+    d = np.zeros((cols.size, w.size))
+    d[good] = (plus - minus)[good] / (2 * h)[good, None] / w
     bend, slope = np.zeros(cols.size), np.zeros(cols.size)
     if centre is not None:
         dp, dm = (plus - centre) / w, (centre - minus) / w
+        d[up & ~down] = dp[up & ~down] / h[up & ~down, None]
+        d[down & ~up] = dm[down & ~up] / h[down & ~up, None]
         bend[good] = np.sum((dp - dm)[good] ** 2, axis=1)
         slope[good] = np.sum((0.5 * (dp + dm))[good] ** 2, axis=1)
     return d, bend, slope, centre
