@@ -3,9 +3,10 @@
 ``bayes-disc track TRACK.yaml [-o OUT.csv] [--quiet]`` — footage or imported points → marker
 file (docs/data-formats.md).
 ``bayes-disc render RENDER.yaml [-o FOLDER] [--quiet]`` — synthetic footage, camera file and truth.
-``bayes-disc test-footage FOLDER [--size small|full] [--seed N] ...`` — footage of a known flight made by
-an imaging model independent of ``render`` (DLT cameras, varying blobs, smear, occlusions, offsets),
-with a plain ``track.yaml`` and the truth, for checking a tracking setup.
+``bayes-disc test-footage FOLDER [--size small|full] [--seed N] [--flight MARKERS.csv] ...`` — footage of a
+known flight (analytic, or a simulated one given as a dense marker file) made by an imaging model
+independent of ``render`` (DLT cameras, varying blobs, smear, occlusions, offsets), with a plain
+``track.yaml`` and the truth, for checking a tracking setup.
 
 Bad input raises :class:`~.errors.VideoInputError`; the main CLI prints it and exits with status 2.
 ``python -m bayes_disc.video ...`` runs the same subcommands on their own.
@@ -44,10 +45,19 @@ def _render(args) -> int:
 
 
 def _test_footage(args) -> int:
-    from .testfootage import standard_test_spec, write_test_footage
+    from .testfootage import standard_test_spec, tabulated_flight_from_markers, write_test_footage
 
+    given = {}
+    if args.flight is not None:
+        flight = tabulated_flight_from_markers(args.flight, args.flight_name)
+        fps = 120.0
+        # frame 0 a frame after the table starts and the last a frame before it ends: exposure smear and
+        # sub-frame delays stay inside the table
+        t0 = float(flight.times[0]) + 1.0 / fps
+        given = dict(flight=flight, t0=t0, n_frames=int(np.floor((flight.times[-1] - t0) * fps + 1e-9)),
+                     name=args.flight_name or "test_flight")
     spec = standard_test_spec(args.size, seed=args.seed, frame_offsets=tuple(args.frame_offsets),
-                              subframes=tuple(args.subframes), timestamps=args.timestamps)
+                              subframes=tuple(args.subframes), timestamps=args.timestamps, **given)
     info = write_test_footage(spec, args.folder, progress=not args.quiet)
     if not args.quiet:
         offs = ", ".join(f"{n} {c['frame_offset']}{c['subframe']:+.2f}" for n, c in info["cameras"].items())
@@ -91,6 +101,11 @@ def register(subparsers) -> None:
                    help="sub-frame delay of each camera in frames, |D| ≤ 0.5 (default 0 0 0)")
     t.add_argument("--timestamps", choices=("mid-exposure", "exposure-start"), default="mid-exposure",
                    help="what a frame's time stamp marks (default mid-exposure)")
+    t.add_argument("--flight", metavar="MARKERS.csv",
+                   help="film this flight instead of the analytic one: a marker file sampled densely and without "
+                        "noise or gaps (bayes-disc synth with sample_rate_hz: 2400, noise_mm: 0, dropout: 0), markers "
+                        "0, 1, 2 at the default layout")
+    t.add_argument("--flight-name", metavar="NAME", help="which flight of --flight's file (needed if it holds several)")
     t.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     t.set_defaults(func=_test_footage)
 

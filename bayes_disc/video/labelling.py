@@ -9,6 +9,13 @@ is kept for the second pass (:mod:`.refine`).
 
 When some camera's frame offset must be estimated, every frame of every camera is first detected in
 full (:func:`detect_all`); the labelling pass then reuses those detections.
+
+**Backwards.** Before the tracker has a prediction (the first frames, or after a gap) a marker whose
+identity the layout alone cannot settle — a disc seen obliquely by only two cameras — is left unlabelled.
+Once the pass is over, the frames are walked again from the last to the first with a second tracker fed
+the labels found, so that it predicts backwards in time; a frame with a marker left ambiguous is labelled
+again with that prediction (the same candidates, costs and ambiguity rule) and the new labels are kept
+where they label more markers.
 """
 from __future__ import annotations
 
@@ -159,7 +166,7 @@ def label_frames(cfg, cams: list, srcs: list, offsets: list, backgrounds: list, 
     frames = frame_span(cfg, srcs, offsets)
     F, M, C = len(frames), len(cfg.markers), len(cams)
     views = Views.empty(F, M, C)
-    ambiguous = np.zeros((F, M), bool)
+    labels, kept = [], {}                     # per frame its labels; the blobs of frames with ambiguity
     tracker = Tracker(cfg.layout, cfg.identity)
     counts = {"ROI detections": 0,
               "full-frame detections": 0 if cached is None else sum(len(d) for d in cached)}
@@ -185,14 +192,48 @@ def label_frames(cfg, cams: list, srcs: list, offsets: list, backgrounds: list, 
                  for c, u in enumerate(usable)]
         lab = label_frame(cams, moved, cfg.layout, cfg.identity, pred, psig, blob_cov=[u.cov for u in usable])
         tracker.update(int(f), lab.xyz)
-        ambiguous[k] = lab.ambiguous
-        for m, c in zip(*np.nonzero(lab.views >= 0)):
-            j = lab.views[m, c]
-            views.uv[k, m, c] = usable[c].uv[j]
-            views.cov[k, m, c] = usable[c].cov[j]
-            views.width[k, m, c] = usable[c].width[j]
-            views.cov_shot[k, m, c] = usable[c].cov_shot[j]
+        labels.append(lab)
+        if lab.ambiguous.any():
+            kept[k] = (moved, usable)
+        _keep_views(views, k, lab, usable)
+    relabelled = _label_backwards(cfg, cams, frames, labels, kept)
+    for k in relabelled:
+        _keep_views(views, k, labels[k], kept[k][1])
+    ambiguous = np.array([lab.ambiguous for lab in labels]).reshape(F, M)
     stats = {"frames missing per camera": dict(zip([c.name for c in cams], missing)), **counts, "blobs": n_blobs,
              "blobs left out (merged)": unusable["merged"], "blobs left out (cut by the frame border)": unusable["edge"],
-             "ambiguous labels left NaN": int(ambiguous.sum())}
+             "ambiguous labels left NaN": int(ambiguous.sum()),
+             "labels found backwards": int(sum(relabelled.values()))}
     return FramePass(frames, views, ambiguous, stats, shot)
+
+
+def _keep_views(views: Views, k: int, lab, usable: list) -> None:
+    """Store frame k's labelled views (the blob each marker was labelled with in each camera)."""
+    views.uv[k], views.cov[k], views.width[k], views.cov_shot[k] = np.nan, np.nan, np.nan, 0.0
+    for m, c in zip(*np.nonzero(lab.views >= 0)):
+        j = lab.views[m, c]
+        views.uv[k, m, c] = usable[c].uv[j]
+        views.cov[k, m, c] = usable[c].cov[j]
+        views.width[k, m, c] = usable[c].width[j]
+        views.cov_shot[k, m, c] = usable[c].cov_shot[j]
+
+
+def _label_backwards(cfg, cams: list, frames: np.ndarray, labels: list, kept: dict) -> dict:
+    """Label again, with a tracker running from the last frame to the first, the frames whose labels left
+    a marker ambiguous (module docstring); ``labels`` (F,) FrameLabels are replaced in place, ``kept``
+    {k: (moved centroids, usable blobs)} holds those frames' blobs. Returns {k: markers labelled anew}."""
+    back = Tracker(cfg.layout, cfg.identity)          # fed frames −f: its "ahead" runs back in time
+    found = {}
+    for k in range(len(frames) - 1, -1, -1):
+        f = int(frames[k])
+        if k in kept:
+            pred, psig = back.predict(-f)
+            if pred is not None:
+                moved, usable = kept[k]
+                lab = label_frame(cams, moved, cfg.layout, cfg.identity, pred, psig, blob_cov=[u.cov for u in usable])
+                gain = int(np.sum(np.isfinite(lab.xyz[:, 0]))) - int(np.sum(np.isfinite(labels[k].xyz[:, 0])))
+                if gain > 0:
+                    labels[k] = lab
+                    found[k] = gain
+        back.update(-f, labels[k].xyz)
+    return found

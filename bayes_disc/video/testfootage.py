@@ -9,7 +9,9 @@ tracker is not tested only on the pictures of its own author:
 - **cameras**: 3×4 DLT matrices (skew and unequal pixel scales, no lens distortion), written as
   DLTdv coefficients (origin bottom-left, first pixel 1, world in mm);
 - **flight**: an analytic path x(t) = p₀ + v₀ t + ½ a t², banking and pitching slowly, spinning at
-  ``spin`` rad/s with a small wobble — no simulator of this package is used;
+  ``spin`` rad/s with a small wobble — no simulator of this package is used; or (:class:`TabulatedFlight`)
+  marker positions given densely in time, e.g. a flight ``bayes-disc synth`` simulated with known
+  coefficients, so that footage of it can be tracked and sampled against that truth;
 - **markers**: round Gaussian spots sampled at pixel centres (not integrated over the pixel) with a
   width σ drawn per marker and varied from frame to frame within ``sigma_px``; flux from a marker gain,
   a camera gain, the view angle onto the top face and a per-frame flicker, so that the brightness of a
@@ -83,6 +85,91 @@ class TestFlight:
     pitch_rate: float = 0.05
     spin: float = 50.0
     wobble: float = 0.03
+
+
+@dataclass(frozen=True, eq=False)
+class TabulatedFlight:
+    """A flight given by its world marker positions ``xyz`` (T, M, 3) [m], in the spec's marker order, at
+    ``times`` (T,) [s] on the footage's clock (the clock of the spec's ``t0`` and of ``truth.csv``; for a
+    simulated flight, time from release), strictly increasing and dense enough for a cubic spline through each
+    coordinate (≥ 20 samples per radian of spin: a simulation at 2400 Hz for spins up to 50 rad/s puts the
+    spline within 10⁻⁹ m). Footage may only ask for times inside the table."""
+
+    __test__ = False  # a footage class, not a test case for pytest
+
+    times: np.ndarray
+    xyz: np.ndarray
+
+    def __post_init__(self):
+        from scipy.interpolate import CubicSpline
+        t, X = np.asarray(self.times, float), np.asarray(self.xyz, float)
+        if t.ndim != 1 or X.shape[:1] != t.shape or X.ndim != 3 or X.shape[2] != 3:
+            raise ValueError(f"a tabulated flight needs times (T,) and xyz (T, M, 3), got {t.shape} and {X.shape}")
+        if t.size < 4 or np.any(np.diff(t) <= 0) or not np.all(np.isfinite(X)):
+            raise ValueError("a tabulated flight needs ≥ 4 strictly increasing times and finite positions")
+        object.__setattr__(self, "_spline", CubicSpline(t, X.reshape(t.size, -1), axis=0))
+
+    def positions(self, t) -> np.ndarray:
+        """World marker positions (T', M, 3) [m] at times t (T',) [s] on the footage's clock."""
+        t = np.atleast_1d(np.asarray(t, float))
+        lo, hi = float(self.times[0]), float(self.times[-1])
+        if t.min() < lo - 1e-12 or t.max() > hi + 1e-12:
+            raise ValueError(f"footage asks for the flight at {t.min():.4f}…{t.max():.4f} s, outside its table "
+                             f"{lo:.4f}…{hi:.4f} s: start the footage later (t0) or make fewer frames")
+        return self._spline(t).reshape(t.size, -1, 3)
+
+
+#: a table this many radians of marker rotation per sample apart or more is too sparse for the spline
+MAX_TABLE_TURN_RAD = 0.05
+
+
+def tabulated_flight_from_markers(path, flight: str | None = None, markers=DEFAULT_MARKERS) -> TabulatedFlight:
+    """A :class:`TabulatedFlight` from a marker file (docs/data-formats.md) holding one flight densely and
+    without gaps, e.g. ``bayes-disc synth`` with ``sample_rate_hz: 2400``, ``noise_mm: 0``, ``dropout: 0``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The marker file.
+    flight : str, optional
+        Which flight (needed when the file holds several).
+    markers : dict
+        {id: body position [m]} of the footage's markers; the file must hold exactly these ids.
+
+    Returns
+    -------
+    TabulatedFlight
+        The file's times [s] (for ``synth``, from the release) and positions (T, M, 3) [m].
+
+    Raises
+    ------
+    VideoInputError
+        The file cannot be read, the flight is not in it, a position is missing, or the samples are too far
+        apart for the spline (more than :data:`MAX_TABLE_TURN_RAD` of marker rotation between two).
+    """
+    from ..observation.markers import MarkerFileError, flights_from_table, read_marker_csv
+    from .errors import VideoInputError
+    ids = list(markers)
+    try:
+        obs = flights_from_table(read_marker_csv(path, ids), ids, source=str(path))
+    except (MarkerFileError, OSError) as e:
+        raise VideoInputError(f"{path}: {e}") from None
+    names = [f.name for f in obs]
+    if flight is None and len(obs) > 1:
+        raise VideoInputError(f"{path}: holds flights {names}; name the one to film")
+    chosen = obs[0] if flight is None else next((f for f in obs if f.name == flight), None)
+    if chosen is None:
+        raise VideoInputError(f"{path}: no flight {flight!r} (it holds {names})")
+    if not np.all(np.isfinite(chosen.positions)):
+        raise VideoInputError(f"{path}: flight {chosen.name} has missing positions; film a flight without dropout "
+                              "or noise")
+    d = chosen.positions[:, 1] - chosen.positions[:, 0]
+    turn = np.arccos(np.clip(np.sum(d[1:] * d[:-1], axis=1) / np.linalg.norm(d[1:], axis=1)
+                             / np.linalg.norm(d[:-1], axis=1), -1.0, 1.0))
+    if turn.max() > MAX_TABLE_TURN_RAD:
+        raise VideoInputError(f"{path}: flight {chosen.name}'s markers turn up to {turn.max():.2f} rad between samples, "
+                              f"more than {MAX_TABLE_TURN_RAD} for the spline: synthesize it at a higher sample_rate_hz")
+    return TabulatedFlight(chosen.times, chosen.positions)
 
 
 @dataclass(frozen=True)
@@ -202,9 +289,22 @@ def pose(flight: TestFlight, t) -> tuple[np.ndarray, np.ndarray]:
 
 def marker_positions(spec: TestFootageSpec, t) -> tuple[np.ndarray, np.ndarray]:
     """World marker positions (T, M, 3) [m] and top-face normals (T, 3) at times t (T,) [s]."""
+    if isinstance(spec.flight, TabulatedFlight):
+        X = spec.flight.positions(t)
+        return X, top_normals(X, spec.layout)
     c, R = pose(spec.flight, np.asarray(t, float) - spec.t0)
     X = np.einsum("tij,mj->tmi", R, spec.layout) + c[:, None, :]
     return X, -R[:, :, 2]
+
+
+def top_normals(X: np.ndarray, layout: np.ndarray) -> np.ndarray:
+    """Unit normals (T, 3) of the top face (body −z) from the first three markers' world positions X
+    (T, M, 3) and their body positions ``layout`` (M, 3): a rotation keeps the sense of a cross product."""
+    n = np.cross(X[:, 1] - X[:, 0], X[:, 2] - X[:, 0])
+    sense = np.sign(np.cross(layout[1] - layout[0], layout[2] - layout[0]) @ [0.0, 0.0, -1.0])
+    if sense == 0:
+        raise ValueError("the first three markers are collinear or their plane contains the disc's axis")
+    return sense * n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -360,7 +460,8 @@ def standard_test_spec(size: str = "full", seed: int = 1, frame_offsets=(0, 0, 2
 
     size ``full``: 1280×1024 px, 151 frames at 120 Hz (1.25 s, ≈ 15 m); ``small``: 640×512 px, 48 frames
     (0.39 s, ≈ 5 m) seen from closer. frame_offsets, subframes: k_c, δ_c per camera (the third camera
-    starts two frames late by default). Keyword arguments replace fields of :class:`TestFootageSpec`.
+    starts two frames late by default). Keyword arguments replace fields of :class:`TestFootageSpec`
+    (``flight``, ``n_frames``, ``t0``, …; the patch and poles are placed on the flight given).
     """
     if size == "full":
         n, wh, scale, focal = 151, (1280, 1024), 1.0, (1000.0, 970.0, 860.0)
@@ -375,7 +476,7 @@ def standard_test_spec(size: str = "full", seed: int = 1, frame_offsets=(0, 0, 2
     cams = tuple(TestCamera(name, dlt_camera(pos, tgt, f, wh, aspect, skew, pp), wh, int(k), float(d), gain)
                  for (name, pos, tgt, aspect, skew, pp), f, k, d, gain in
                  zip(rig, focal, frame_offsets, subframes, (1.0, 0.9, 1.15)))
-    spec = TestFootageSpec(cameras=cams, seed=seed, n_frames=n, **changes)
+    spec = TestFootageSpec(cameras=cams, seed=seed, **{"n_frames": n, **changes})
     return _with_scenery(spec)
 
 
