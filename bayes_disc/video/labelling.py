@@ -15,7 +15,7 @@ identity the layout alone cannot settle — a disc seen obliquely by only two ca
 Once the pass is over, the frames are walked again from the last to the first with a second tracker fed
 the labels found, so that it predicts backwards in time; a frame with a marker left ambiguous is labelled
 again with that prediction (the same candidates, costs and ambiguity rule) and the new labels are kept
-where they label more markers.
+where they label more markers and keep every marker the forward pass labelled where it was.
 """
 from __future__ import annotations
 
@@ -231,8 +231,11 @@ def _label_backwards(cfg, cams: list, frames: np.ndarray, labels: list, kept: di
             if pred is not None:
                 moved, usable = kept[k]
                 lab = label_frame(cams, moved, cfg.layout, cfg.identity, pred, psig, blob_cov=[u.cov for u in usable])
-                gain = int(np.sum(np.isfinite(lab.xyz[:, 0]))) - int(np.sum(np.isfinite(labels[k].xyz[:, 0])))
-                if gain > 0:
+                before = np.isfinite(labels[k].xyz[:, 0])
+                gain = int(np.sum(np.isfinite(lab.xyz[:, 0]))) - int(before.sum())
+                agree = np.all(np.linalg.norm(lab.xyz[before] - labels[k].xyz[before], axis=1)
+                               <= cfg.identity.swap_distance_m)      # NaN (now unlabelled) compares False
+                if gain > 0 and agree:
                     labels[k] = lab
                     found[k] = gain
         back.update(-f, labels[k].xyz)
