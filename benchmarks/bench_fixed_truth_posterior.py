@@ -7,10 +7,12 @@ campaign's run settings under ``prior.initial_conditions`` ``reference`` and ``f
 seed). Printed after every draw, per prior: the mean over the draws of the truth's Mahalanobis distance² under
 the posterior mean and covariance of the ten coefficients (χ²₁₀ if the intervals are right: expected 10, band
 10 ± 2·√20/√K), and mean and sd over the draws of z_k = (θ̃_k − posterior mean_k)/posterior sd_k (sd(z) = 1
-when calibrated).
+when calibrated, within 1 ± 0.15 asked), and how many runs stopped unconverged. With ``--out`` the figures
+and every draw's distance², z and convergence are written as JSON (a new file: an existing one is not
+replaced); tools/make_validation.py reads such files from runs/calibration/fixed_truth/.
 
     python benchmarks/bench_fixed_truth_posterior.py runs/calibration/four_flights_varied.yaml [--replicate 0]
-                                                     [--draws 20] [--priors reference flat]
+                                                     [--draws 20] [--priors reference flat] [--out FILE]
 """
 from __future__ import annotations
 
@@ -19,7 +21,7 @@ import json
 import logging
 import sys
 import tempfile
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +39,10 @@ from bayes_disc.observation.synth import synthesize, write_synth  # noqa: E402
 from bayes_disc.physics import Coefficients  # noqa: E402
 
 
+#: the launch values of each flight written with the figures (the design)
+DESIGN = ("name", "speed", "launch_angle_deg", "alpha_deg", "roll_deg", "spin", "p", "q", "duration", "noise_mm")
+
+
 def coverage_figures(truth: np.ndarray, draws: np.ndarray) -> tuple[float, np.ndarray]:
     """Mahalanobis distance² of ``truth`` (n,) under the mean and covariance of ``draws`` (m, n), and z (n,)."""
     mean, cov = draws.mean(axis=0), np.cov(draws.T)
@@ -44,8 +50,9 @@ def coverage_figures(truth: np.ndarray, draws: np.ndarray) -> tuple[float, np.nd
     return float(d @ np.linalg.solve(cov, d)), d / np.sqrt(np.diag(cov))
 
 
-def sample_draws(run: dict, ic: str, folder: Path, names: list) -> np.ndarray:
-    """(m, n) posterior draws of the coefficients ``names`` of one run under ``prior.initial_conditions`` = ic."""
+def sample_draws(run: dict, ic: str, folder: Path, names: list) -> tuple[np.ndarray, bool]:
+    """(m, n) posterior draws of the coefficients ``names`` of one run under ``prior.initial_conditions`` = ic,
+    and whether the sampler met its convergence rule."""
     prior = run.get("prior", "potts_crowther")
     prior = {**prior, "initial_conditions": ic} if isinstance(prior, dict) else {"coefficients": prior,
                                                                                   "initial_conditions": ic}
@@ -53,7 +60,18 @@ def sample_draws(run: dict, ic: str, folder: Path, names: list) -> np.ndarray:
     run_sample(cfg, progress=False)
     import arviz as az
     post = az.from_netcdf(str(folder / f"run_{ic}" / "posterior.nc")).posterior
-    return np.stack([np.asarray(posterior_draws(post, n), float).reshape(-1) for n in names], axis=-1)
+    converged = json.loads((folder / f"run_{ic}" / "summary.json").read_text())["convergence"]["converged"]
+    return np.stack([np.asarray(posterior_draws(post, n), float).reshape(-1) for n in names], axis=-1), converged
+
+
+def figures(d2: list, zs: list, converged: list, names: list) -> dict:
+    """Mean distance² with its Monte-Carlo band, mean and sd of z per coefficient, unconverged runs."""
+    n = len(d2)
+    band = 2.0 * np.sqrt(20.0 / n)
+    sd_z = np.std(zs, axis=0, ddof=1) if n > 1 else np.full(len(names), np.nan)
+    return {"mean_distance2": round(float(np.mean(d2)), 2), "band": [round(10 - band, 2), round(10 + band, 2)],
+            "mean_z": dict(zip(names, np.mean(zs, axis=0).round(3).tolist())),
+            "sd_z": dict(zip(names, np.round(sd_z, 3).tolist())), "not_converged": int(n - sum(converged))}
 
 
 def main(argv=None) -> int:
@@ -62,7 +80,10 @@ def main(argv=None) -> int:
     ap.add_argument("--replicate", type=int, default=0)
     ap.add_argument("--draws", type=int, default=20)
     ap.add_argument("--priors", nargs="+", default=["reference", "flat"], choices=["reference", "flat"])
+    ap.add_argument("--out", type=Path, help="write the figures and every draw's values here (a new file)")
     a = ap.parse_args(argv)
+    if a.out is not None and a.out.exists():
+        raise SystemExit(f"{a.out} exists: give a new file (it is not replaced)")
     logging.getLogger("bayes_disc").setLevel(logging.WARNING)
     cal = load_cal_config(a.campaign)
     rng = replicate_rng(cal, a.replicate)
@@ -75,6 +96,7 @@ def main(argv=None) -> int:
     t = np.array([truth[n] for n in names])
     d2 = {ic: [] for ic in a.priors}
     zs = {ic: [] for ic in a.priors}
+    conv = {ic: [] for ic in a.priors}
     for k in range(a.draws):
         spec = replace(cal.template, name=f"fixed_{a.replicate}", flights=flights,
                        coefficients=Coefficients.from_mapping(truth), seed=5000 + k)
@@ -84,16 +106,24 @@ def main(argv=None) -> int:
             write_synth(result, tmp / "markers.csv", tmp / "truth.json")
             run = replicate_run(cal, result, sampler_seed)
             for ic in a.priors:
-                dd, z = coverage_figures(t, sample_draws(run, ic, tmp, names))
+                draws, converged = sample_draws(run, ic, tmp, names)
+                dd, z = coverage_figures(t, draws)
                 d2[ic].append(dd)
                 zs[ic].append(z)
-        n = k + 1
-        band = 2.0 * np.sqrt(20.0 / n)
-        print(json.dumps({"replicate": a.replicate, "draws": n, **{ic: {
-            "mean_distance2": round(float(np.mean(d2[ic])), 2), "band": [round(10 - band, 2), round(10 + band, 2)],
-            "mean_z": dict(zip(names, np.mean(zs[ic], axis=0).round(2).tolist())),
-            "sd_z": dict(zip(names, (np.std(zs[ic], axis=0, ddof=1) if n > 1 else np.full(10, np.nan)).round(2)
-                             .tolist()))} for ic in a.priors}}), flush=True)
+                conv[ic].append(bool(converged))
+        out = {"campaign": cal.name, "replicate": a.replicate, "draws": k + 1,
+               **{ic: figures(d2[ic], zs[ic], conv[ic], names) for ic in a.priors}}
+        print(json.dumps(out), flush=True)
+    if a.out is not None:
+        out["truth"] = truth
+        out["flights"] = [{key: v for key, v in asdict(f).items() if key in DESIGN and v is not None}
+                          for f in flights]
+        out["per_draw"] = {ic: {"distance2": np.round(d2[ic], 4).tolist(), "z": np.round(zs[ic], 4).tolist(),
+                                "converged": conv[ic]} for ic in a.priors}
+        out["command"] = (f"python benchmarks/bench_fixed_truth_posterior.py {a.campaign.as_posix()} --replicate "
+                          f"{a.replicate} --draws {a.draws} --priors {' '.join(a.priors)}")
+        a.out.parent.mkdir(parents=True, exist_ok=True)
+        a.out.write_text(json.dumps(out, indent=1))
     return 0
 
 

@@ -21,10 +21,13 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from validation_common import (COEFFICIENTS, ROOT, binomial_band, familywise_mass, fmt,  # noqa: E402
+                               inside, load, outside_probability, table)
+from validation_fixed_truth import section_fixed_truth  # noqa: E402
+
 OUT = ROOT / "docs" / "validation.md"
-COEFFICIENTS = ["CL0", "CLa", "CD0", "CDa", "CM0", "CMa", "CMq", "CRr", "CRp", "CNr"]
-BAND_MASS = 0.95
 LEVELS = ("50", "90")
 
 #: the calibration campaigns on the page: (file stem, what it holds). Results come from their folders.
@@ -46,50 +49,6 @@ NATURE_FAMILY = {"ground_effect_power": "ground_effect", "wind_tunnel_aero": "no
 
 
 # ----------------------------------------------------------------------------------------- small helpers
-def load(rel: str):
-    return json.loads((ROOT / rel).read_text())
-
-
-def fmt(x, digits: int = 3) -> str:
-    """A number with ``digits`` significant digits, minus sign as U+2212; '—' for None or NaN."""
-    if x is None or (isinstance(x, float) and math.isnan(x)):
-        return "—"
-    if x == 0:
-        return "0"
-    a = abs(x)
-    if 1e-3 <= a < 1e5:
-        s = f"{x:.{max(digits - 1 - int(math.floor(math.log10(a))), 0)}f}"
-    else:
-        s = f"{x:.{digits - 1}e}".replace("e-0", "e-").replace("e+0", "e")
-    return s.replace("-", "−")
-
-
-def table(header: list[str], rows: list[list[str]]) -> list[str]:
-    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    out += ["| " + " | ".join(r) + " |" for r in rows]
-    return out
-
-
-def binomial_band(n: int, p: float, mass: float = BAND_MASS) -> tuple[float, float]:
-    """Central ``mass`` range of Binomial(n, p)/n (the same definition as ``bayes-disc calibrate``)."""
-    lo, hi = stats.binom.ppf([(1 - mass) / 2, (1 + mass) / 2], n, p)
-    return float(lo / n), float(hi / n)
-
-
-def outside_probability(n: int, p: float, mass: float = BAND_MASS) -> float:
-    lo, hi = binomial_band(n, p, mass)
-    inside = stats.binom.cdf(round(hi * n), n, p) - stats.binom.cdf(round(lo * n) - 1, n, p)
-    return float(1.0 - inside)
-
-
-def familywise_mass(k: int, mass: float = BAND_MASS) -> float:
-    return 1.0 - (1.0 - mass) / max(k, 1)
-
-
-def inside(x: float, band) -> bool:
-    return band[0] - 1e-12 <= x <= band[1] + 1e-12
-
-
 # ----------------------------------------------------------------------------------------- calibration
 def replicate_records(stem: str) -> list[dict]:
     folder = ROOT / "runs" / "calibration" / stem / "replicates"
@@ -285,26 +244,6 @@ def section_recovery() -> list[str]:
 
 
 # ----------------------------------------------------------------------------------------- fixed truths
-def section_fixed_truth() -> list[str]:
-    found = sorted((ROOT / "benchmarks" / "results").glob("fixed_truth*.json"))
-    L = ["## Coverage at fixed truths", "",
-         "**Claim.** At one fixed truth, with only the noise redrawn, the intervals have the width the noise "
-         "implies (sd of z = 1), and the likelihood alone is calibrated over a thousand data sets.", ""]
-    if not found:
-        L += ["No result files of these measurements are committed, so this page states no numbers for them. "
-              "They are measured by:", "",
-              "```bash",
-              "python benchmarks/bench_fixed_truth.py runs/calibration/four_flights_ar1.yaml --fits 400 --fix-rho 0.85",
-              "python benchmarks/bench_linear_sbc.py runs/calibration/four_flights_white.yaml --replicates 1000",
-              "python benchmarks/bench_linear_sbc.py runs/calibration/four_flights_ar1.yaml --replicates 1000 --rho integrated",
-              "```", "",
-              "(the first fits one replicate's truth by least squares under many noise draws; the second and "
-              "third compute the exact posterior of the model linearised at the truth for any number of a "
-              "campaign's data sets, without a sampler: [method](calibration.md#the-likelihood-alone-over-a-thousand-data-sets)).",
-              "", "Verdict: not established by committed files.", ""]
-    return L
-
-
 # ----------------------------------------------------------------------------------------- identifiability
 def section_identifiability() -> list[str]:
     summ = load("runs/flatball/out/summary.json")

@@ -1,0 +1,57 @@
+"""Helpers shared by the sections of docs/validation.md (tools/make_validation.py): reading the committed
+result files, number and table formatting, binomial bands. Needs numpy and scipy only."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from scipy import stats
+
+ROOT = Path(__file__).resolve().parents[1]
+COEFFICIENTS = ["CL0", "CLa", "CD0", "CDa", "CM0", "CMa", "CMq", "CRr", "CRp", "CNr"]
+BAND_MASS = 0.95
+
+
+def load(rel: str):
+    return json.loads((ROOT / rel).read_text())
+
+
+def fmt(x, digits: int = 3) -> str:
+    """A number with ``digits`` significant digits, minus sign as U+2212; '—' for None or NaN."""
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "—"
+    if x == 0:
+        return "0"
+    a = abs(x)
+    if 1e-3 <= a < 1e5:
+        s = f"{x:.{max(digits - 1 - int(math.floor(math.log10(a))), 0)}f}"
+    else:
+        s = f"{x:.{digits - 1}e}".replace("e-0", "e-").replace("e+0", "e")
+    return s.replace("-", "−")
+
+
+def table(header: list[str], rows: list[list[str]]) -> list[str]:
+    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    out += ["| " + " | ".join(r) + " |" for r in rows]
+    return out
+
+
+def binomial_band(n: int, p: float, mass: float = BAND_MASS) -> tuple[float, float]:
+    """Central ``mass`` range of Binomial(n, p)/n (the same definition as ``bayes-disc calibrate``)."""
+    lo, hi = stats.binom.ppf([(1 - mass) / 2, (1 + mass) / 2], n, p)
+    return float(lo / n), float(hi / n)
+
+
+def outside_probability(n: int, p: float, mass: float = BAND_MASS) -> float:
+    lo, hi = binomial_band(n, p, mass)
+    inside = stats.binom.cdf(round(hi * n), n, p) - stats.binom.cdf(round(lo * n) - 1, n, p)
+    return float(1.0 - inside)
+
+
+def familywise_mass(k: int, mass: float = BAND_MASS) -> float:
+    return 1.0 - (1.0 - mass) / max(k, 1)
+
+
+def inside(x: float, band) -> bool:
+    return band[0] - 1e-12 <= x <= band[1] + 1e-12
