@@ -54,9 +54,10 @@ IC_SD = {"position": 0.5, "velocity": 5.0, "attitude": 0.5, "omega": 30.0}
 #: ``prior.initial_conditions`` values: the conditional reference factor on (``reference``) or off (``flat``:
 #: the wide Gaussians alone)
 IC_PRIORS = ("reference", "flat")
-#: the default of ``prior.initial_conditions``: ``flat`` until fixed-truth coverage on varied designs shows
-#: which covers (benchmarks/bench_fixed_truth_posterior.py; docs/how-it-works.md)
-IC_PRIOR_DEFAULT = "flat"
+#: the default of ``prior.initial_conditions``: at fixed truths on varied designs the flat prior's intervals
+#: sit off the truth along the pitching-moment direction and the reference prior's do not, nearly
+#: (docs/validation.md, coverage at fixed truths; docs/how-it-works.md)
+IC_PRIOR_DEFAULT = "reference"
 
 
 @dataclass(frozen=True)
