@@ -162,8 +162,8 @@ def test_the_log_prior_adds_the_surrogate_of_the_coefficients(two_flights):
 
 # --------------------------------------------------------------------------------------------- configuration
 @pytest.mark.parametrize("block, expected", [
-    ("prior: potts_crowther", ("potts_crowther", "reference")),                  # the default
-    ("prior: {initial_conditions: flat}", ("potts_crowther", "flat")),
+    ("prior: potts_crowther", ("potts_crowther", "flat")),                       # the default
+    ("prior: {initial_conditions: reference}", ("potts_crowther", "reference")),
     ("prior: {coefficients: weak, initial_conditions: reference}", ("weak", "reference")),
     ("prior: {around: hummel2002, relative_sd: 0.2, initial_conditions: flat}", ("around", "flat")),
 ])
