@@ -19,7 +19,7 @@ def design_text(flights: list[dict]) -> str:
     """'7.6 m/s α 29°, 16.9 m/s α 5°, …' with p, q where the release wobbles."""
     parts = []
     for f in flights:
-        s = f"{f['speed']:.1f} m/s α {f['alpha_deg']:.0f}°"
+        s = f"{f['speed']:.1f} m/s α {round(f['alpha_deg']) + 0:d}°".replace("-", "−")
         if abs(f.get("p", 0.0)) >= 1 or abs(f.get("q", 0.0)) >= 1:
             s += f" p, q {f['p']:+.1f}, {f['q']:+.1f} rad/s".replace("-", "−")
         parts.append(s)
@@ -69,6 +69,8 @@ def section_fixed_truth() -> list[str]:
     L += [""]
     L += table(["design", "initial-condition prior", "draws", "mean distance² [band]", "in band",
                 "sd(z) outside 1 ± 0.15", "largest mean z", "unconverged runs"], rows)
+    L += ["", "A run that stopped at the template's step cap before its convergence rule was met is counted as "
+          "unconverged; its draws are used all the same."]
     k_min = min(r["draws"] for r in found)
     L += ["", f"sd(z) per coefficient (its Monte-Carlo standard error with K = {k_min} draws is about "
           f"1/√(2(K − 1)) = {fmt(1 / np.sqrt(2 * (k_min - 1)), 2)}, so ± 0.15 is about "

@@ -56,8 +56,8 @@ IC_SD = {"position": 0.5, "velocity": 5.0, "attitude": 0.5, "omega": 30.0}
 IC_PRIORS = ("reference", "flat")
 #: the default of ``prior.initial_conditions``: ``flat``, although at fixed truths on varied designs its
 #: pitching-moment coefficients sit off the truth and the reference prior's nearly do not (docs/validation.md),
-#: until the reference prior's surrogate can be built on every data set (short flights with AR(1) noise: the
-#: initial conditions' information singular at design points)
+#: until the reference prior can be built on every data set (four short flights with AR(1) noise: one flight's
+#: initial conditions' information singular at the least-squares optimum)
 IC_PRIOR_DEFAULT = "flat"
 
 
