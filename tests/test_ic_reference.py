@@ -16,7 +16,8 @@ from conftest import run_config, write_short_flight, write_two_flights
 
 def test_the_surrogate_recovers_a_quadratic_exactly():
     """Values of a known quadratic at the design points give back that function at points off the design (in
-    the original coefficients' units), the ridge terms zero; the record reads back to the same function. (With
+    the original coefficients' units), the ridge terms zero, held within the range of the design's values; the
+    record reads back to the same function. (With
     t³, t⁴ terms the first pass's direction is only close to theirs: the held-out test below measures that
     case on real flights.)"""
     ridge = (0.0, 0.0)
@@ -31,9 +32,12 @@ def test_the_surrogate_recovers_a_quadratic_exactly():
     truth = ReferenceSurrogate(centre, np.linalg.inv(L), 1.5, rng.standard_normal(n), Q, V[:, 0], np.array(ridge),
                                radius=50.0)
     design = centre + reference_design(n, (1.0, 2.0), 40, 1.0, rng) @ L.T
-    fitted = fit_reference_surrogate(design, truth(design), centre, cov, radius=50.0)
-    probe = centre + 1.5 * rng.standard_normal((20, n)) @ L.T
-    np.testing.assert_allclose(fitted(probe), truth(probe), atol=1e-8)
+    fitted = fit_reference_surrogate(design, truth(design), centre, L, radius=50.0)
+    probe = centre + 1.5 * rng.standard_normal((40, n)) @ L.T
+    low, high = truth(design).min(), truth(design).max()
+    inside = (truth(probe) > low) & (truth(probe) < high)
+    assert 10 <= inside.sum() < probe.shape[0]
+    np.testing.assert_allclose(fitted(probe), np.clip(truth(probe), low, high), atol=1e-8)   # held in range
     again = surrogate_from_dict(json.loads(json.dumps(fitted.to_dict())))
     np.testing.assert_allclose(again(probe), fitted(probe), rtol=1e-12)
 
@@ -104,9 +108,10 @@ def test_the_reference_prior_moves_the_marginal_back_to_the_profile():
 
     def g(c):
         return sum(0.5 * np.linalg.slogdet(_design(c).T @ _design(c) / SIGMA ** 2)[1] for _ in ys)
-    centre, cov = np.array([m_prof]), np.array([[sd_flat ** 2]])
+    centre = np.array([m_prof])
     design = centre + reference_design(1, (1.5, 3.0), 8, 1.3, np.random.default_rng(2)) * sd_flat
-    surrogate = fit_reference_surrogate(design, np.array([g(c) for c in design[:, 0]]), centre, cov, radius=4.0)
+    surrogate = fit_reference_surrogate(design, np.array([g(c) for c in design[:, 0]]), centre, np.array([[sd_flat]]),
+                                        radius=4.0)
     m_ref, sd_ref = _mean_sd(cs, marginal + surrogate(cs[:, None]))
     exact_ref, _ = _mean_sd(cs, marginal + np.array([g(c) for c in cs]))
     assert abs(m_ref - m_prof) < 0.1 * abs(m_flat - m_prof)
@@ -147,6 +152,25 @@ def test_the_surrogate_matches_the_exact_log_determinants_at_held_out_points(two
     assert spread > 1.0
     assert np.sqrt(np.mean(e * e)) < 0.1 * spread and np.max(np.abs(e)) < 0.3 * spread, (e, spread)
     assert s.accuracy["rms_error"] < 0.1 * s.accuracy["sd_exact"] and s.accuracy["points"] >= 20
+
+
+@pytest.mark.slow
+def test_the_surrogate_is_built_where_a_flight_nears_instability(tmp_path):
+    """Four 0.5-s flights with AR(1) marker noise and the weak prior (seed 40): at the least-squares optimum
+    (CMq > 0) one flight's wobble grows so fast that a 0.003 rad/s step of its initial roll rate makes its
+    simulation diverge on both sides. Its Jacobian columns are taken with smaller steps, so every flight's
+    information is regular, the surrogate is built from finite values, and it stays within their range."""
+    from bayes_disc.inference.fitting.reference import build_ic_reference, ic_log_determinants
+    from bayes_disc.observation.synth import Defects
+    from test_noise_auto import least_squares_choice, write_flights
+    path = write_flights(tmp_path, Defects(ar1_rho=0.85), 40, 4, 0.5, 1.5, "prior: weak")
+    cfg, _, choice = least_squares_choice(path)
+    problem, ls = choice.problem, choice.ls
+    assert np.all(np.isfinite(ic_log_determinants(problem, ls.theta, ls.sigma)))
+    s = build_ic_reference(problem, ls, cfg.sampler.seed)
+    assert np.all(np.isfinite(s.bounds)) and s.bounds[0] < s.offset < s.bounds[1]
+    far = ls.theta[:10] + 20.0 * np.sqrt(np.diag(ls.cov[:10, :10])) * np.random.default_rng(2).standard_normal((50, 10))
+    assert np.all((s(far) >= s.bounds[0]) & (s(far) <= s.bounds[1]))
 
 
 def test_the_log_prior_adds_the_surrogate_of_the_coefficients(two_flights):

@@ -255,22 +255,32 @@ def test_least_squares_estimates_rho_of_ar1_noise(clean):
     assert "rho_a" not in white.names
 
 
-def test_jacobian_at_the_edge_of_rho_is_one_sided_and_finite(clean):
-    """ρ half a finite-difference step below 1: the lane beyond 1 has no likelihood (non-finite residuals), so
-    ρ's column is the backward difference, and every other column stays central."""
+@pytest.mark.parametrize("gap, step", [(0.5, 1e-4), (1e-6, 1e-4)])
+def test_jacobian_at_the_edge_of_rho_is_finite(clean, gap, step):
+    """ρ a fraction ``gap`` of a finite-difference step below 1: the lane beyond 1 has no likelihood
+    (non-finite residuals), so ρ's column is recomputed with tenfold smaller steps: the derivative once both
+    lanes lie below 1 and the residuals are linear over the step (half a step below), the backward difference
+    at the smallest step when no step fits (10⁻⁶ of a step below); every other column stays the central
+    difference with the default step."""
     noisy = with_ar1_noise(clean, rho=0.99)
     problem = _problem(noisy, noise_model="ar1")
     i = problem.names.index("rho_a")
     x = _fit(problem).theta.copy()
     h = 1e-4 * problem.prior_sd[i]
-    x[i] = 1.0 - 0.5 * h
+    x[i] = 1.0 - gap * h
     sigma = np.ones(problem.n_groups)
     J = jacobian_blocks(x, problem, sigma)
     assert all(np.all(np.isfinite(b)) for b in J.blocks)
-    below = x.copy()
-    below[i] -= h
-    r0, r1 = problem.noise_residuals(x, 0)[0][0], problem.noise_residuals(below, 0)[0][0]
-    np.testing.assert_allclose(J.blocks[0][:, -1], (r0 - r1) / h, rtol=1e-9, atol=0)   # ρ: the last own column
+    below, above = x.copy(), x.copy()
+    below[i] -= step * h
+    above[i] += step * h
+    r_below = problem.noise_residuals(below, 0)[0][0]
+    if gap > step:      # the derivative: a central difference with a step far smaller than any tried
+        want = (problem.noise_residuals(above, 0)[0][0] - r_below) / (2 * step * h)
+        np.testing.assert_allclose(J.blocks[0][:, -1], want, rtol=0, atol=1e-3 * np.abs(want).max())  # ρ: last own
+    else:               # the backward difference with the smallest step tried
+        want = (problem.noise_residuals(x, 0)[0][0] - r_below) / (step * h)
+        np.testing.assert_allclose(J.blocks[0][:, -1], want, rtol=1e-9, atol=0)
     hc = 1e-4 * problem.prior_sd[0]
     up, down = x.copy(), x.copy()
     up[0] += hc

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 from scipy.stats import multivariate_normal
 
-from bayes_disc.inference.sampling.proposals import EIGENVALUE_FLOOR, MixtureProposal, scaled_cholesky
+from bayes_disc.inference.fitting.covariance import EIGENVALUE_FLOOR, scaled_cholesky
+from bayes_disc.inference.sampling.proposals import MixtureProposal
 
 
 def _mixture():

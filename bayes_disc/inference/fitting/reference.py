@@ -22,6 +22,7 @@ import numpy as np
 
 from ..model.priors import ReferenceSurrogate, fit_reference_surrogate, reference_design, surrogate_accuracy
 from ..model.problem import Problem
+from .covariance import scaled_cholesky
 from .leastsq import LeastSquaresResult
 from .minimiser import MU_NEAR, minimise
 from .profile import DEVIANCE_TOL
@@ -163,8 +164,7 @@ def build_ic_reference(problem: Problem, ls: LeastSquaresResult, seed: int, prog
     """
     n = problem.n_coef
     rng = np.random.default_rng([seed, 7411])
-    S = ls.cov[:n, :n]
-    L = np.linalg.cholesky(S)
+    L = scaled_cholesky(ls.cov[:n, :n])   # the coefficients' metric (floored where it is numerically singular)
     design = reference_design(n, AXIS_RADII, RANDOM_POINTS, RANDOM_SPREAD, rng)
     held = RANDOM_SPREAD * rng.standard_normal((HELD_OUT, n))
     points = ls.theta[:n] + np.vstack([design, held]) @ L.T
@@ -179,7 +179,7 @@ def build_ic_reference(problem: Problem, ls: LeastSquaresResult, seed: int, prog
                            "reference prior is undefined there")
     fit = keep & (np.arange(len(points)) < len(design))
     check = keep & ~fit & (np.arange(len(points)) >= len(design))
-    surrogate = fit_reference_surrogate(points[fit], values[fit], ls.theta[:n], S, TRUST_RADIUS)
+    surrogate = fit_reference_surrogate(points[fit], values[fit], ls.theta[:n], L, TRUST_RADIUS)
     accuracy = {**surrogate_accuracy(surrogate, points[check], values[check]), "design_points": int(fit.sum()),
                 "left_out": int((~keep).sum())}
     return replace(surrogate, accuracy=accuracy)

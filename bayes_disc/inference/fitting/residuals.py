@@ -43,8 +43,9 @@ def _flight_columns(x: np.ndarray, problem: Problem, sigma: np.ndarray, k: int, 
         at the edge of its domain: AR(1)'s ρ a step from 1); zero where both failed, or one did and the
         centre's simulation failed too.
     bend, slope : (c,) arrays
-        |d⁺ − d⁻|² and |d⁺ + d⁻|²/4 summed over the rows, d± the one-sided differences (zero unless both
-        lanes and the centre succeeded).
+        |d⁺ − d⁻|² and |d⁺ + d⁻|²/4 summed over the rows, d± the one-sided differences; where a lane failed
+        and the centre did not, bend is inf and slope zero (the step reaches where the simulation fails: a
+        smaller one may not); zero where the centre failed.
     centre : (n_k,) array or None
         The residuals at x (None if that simulation failed).
 
@@ -72,6 +73,7 @@ def _flight_columns(x: np.ndarray, problem: Problem, sigma: np.ndarray, k: int, 
         d[down & ~up] = dm[down & ~up] / h[down & ~up, None]
         bend[good] = np.sum((dp - dm)[good] ** 2, axis=1)
         slope[good] = np.sum((0.5 * (dp + dm))[good] ** 2, axis=1)
+        bend[~good] = np.inf
     return d, bend, slope, centre
 
 
@@ -128,7 +130,9 @@ def jacobian_blocks(x: np.ndarray, problem: Problem, sigma: np.ndarray, free: np
     :data:`NONLINEARITY_MAX` of their mean (summed over the flights) is recomputed with a step ten times
     smaller, at most :data:`STEP_REDUCTIONS` times: a parameter the data pin down to far less than its
     prior scale (CRr on the inertial logs: 7·10⁻⁹ against a 10⁻⁶ step) then still gets a derivative, not a
-    secant across a bend. Where no column bends the result is the plain central difference.
+    secant across a bend. A column with a failed lane (a step that reaches coefficients or initial conditions
+    the simulation cannot integrate, as next to an unstable wobble mode, or beyond a parameter's domain) is
+    reduced the same way. Where no column bends the result is the plain central difference.
 
     Parameters
     ----------

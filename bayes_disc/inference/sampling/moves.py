@@ -46,7 +46,7 @@ from emcee.moves.move import Move
 from emcee.state import State
 
 from ..model.problem import Problem
-from .proposals import scaled_cholesky
+from ..fitting.covariance import scaled_cholesky
 
 
 def block_factors(problem: Problem, cov: np.ndarray) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:

@@ -24,9 +24,10 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
-from scipy.linalg import lapack, solve_triangular
+from scipy.linalg import solve_triangular
 
 from ._ridge_kernels import interpolated_product, interpolated_whiten
+from ..fitting.covariance import scaled_cholesky
 from ..model.problem import Problem
 
 #: proposal sd / posterior sd after a warm-up re-fit (slightly wider: safe tails)
@@ -75,47 +76,6 @@ class Proposal:
     def load(cls, path: Path) -> "Proposal":
         z = np.load(path)
         return cls(mean=z["mean"], chol=z["chol"], adapted=int(z["adapted"]))
-
-
-#: eigenvalues of the correlation matrix below this share of the largest are raised to it (:func:`scaled_cholesky`)
-EIGENVALUE_FLOOR = 1e-10
-
-
-def scaled_cholesky(cov: np.ndarray) -> np.ndarray:
-    """Cholesky factor of a covariance whose scales span many decades (CNr ~ 1e−7 beside positions ~ 1e−3):
-    factor the correlation matrix C (eigenvalues floored at :data:`EIGENVALUE_FLOOR` of the largest) and
-    scale back.
-
-    The factor of C itself is taken where the floor cannot bind: λ_min(C) ≥ 1/‖L⁻¹‖²_F (L⁻¹ by one
-    triangular inversion) and λ_max(C) ≤ tr C = n, so ‖L⁻¹‖²_F ≤ 1/(n · floor) is enough. Only otherwise
-    (or where C is not positive definite) are the eigenvalues computed: at 297 parameters, one thread, the
-    eigenvalue route costs ~10 ms, the direct one 3.6 ms (ridge proposals build one factor per profile
-    point: 64 on the 24-flight benchmark).
-
-    Parameters
-    ----------
-    cov : (n, n) array
-        Symmetric covariance.
-
-    Returns
-    -------
-    (n, n) array
-        Lower-triangular L with L Lᵀ = cov (floored).
-    """
-    d = np.sqrt(np.maximum(np.diag(cov), 1e-300))
-    corr = cov / np.outer(d, d)
-    corr = 0.5 * (corr + corr.T)
-    try:
-        L = np.linalg.cholesky(corr)
-        inverse, info = lapack.dtrtri(L, lower=1)
-        bound = 1.0 / (corr.shape[0] * EIGENVALUE_FLOOR)          # on ‖L⁻¹‖²_F
-        if info == 0 and np.all(np.isfinite(inverse)) and np.sum(inverse ** 2) <= bound:
-            return d[:, None] * L
-    except np.linalg.LinAlgError:
-        pass
-    w, V = np.linalg.eigh(corr)
-    w = np.maximum(w, EIGENVALUE_FLOOR * w.max())
-    return d[:, None] * np.linalg.cholesky((V * w) @ V.T)
 
 
 @dataclass(frozen=True)
