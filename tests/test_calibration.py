@@ -1,7 +1,7 @@
 """Simulation-based calibration: the rank/coverage statistics, CAL.yaml validation, a campaign on Dask."""
 import json
 import re
-
+from collections import Counter
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -13,6 +13,7 @@ from bayes_disc.calibration import load_cal_config
 from bayes_disc.calibration.stats import (binomial_band, covers, rank_bins, rank_counts, rank_uniformity_p,
                                           sbc_rank, summarize, thinned_draws)
 from bayes_disc.cli import main
+from bayes_disc.inference.fitting.noise_choice import TITLES as NOISE_LABELS
 from bayes_disc.observation.config_io import ConfigError
 
 
@@ -188,6 +189,7 @@ def test_tiny_campaign_on_two_workers_resumes_without_redoing(tmp_path, capsys):
     rec1 = json.loads(files[1].read_text())
     # the run's sampler settings are recorded, the configured ones and the defaults
     assert rec1["sampler"]["max_steps"] == 60 and rec1["sampler"]["independence_fraction"] == 0.8
+    assert set(rec1["noise"]) == {"f1"} and rec1["noise"]["f1"] in NOISE_LABELS    # noise: auto, the default
     files[0].unlink()
     p.write_text(TINY.format(n=3))
     capsys.readouterr()
@@ -201,6 +203,8 @@ def test_tiny_campaign_on_two_workers_resumes_without_redoing(tmp_path, capsys):
     assert json.loads((out / "replicates/replicate_00001.json").read_text()) == rec1
     cal = json.loads((out / "calibration.json").read_text())
     assert cal["replicates"] == 3 and not cal["failed"]
+    assert sum(cal["noise_chosen"].values()) == 3 and set(cal["noise_chosen"]) <= set(NOISE_LABELS)
+    assert cal["noise_chosen"] == dict(Counter(json.loads(f.read_text())["noise"]["f1"] for f in files))
     for name in ("CL0", "CLa", "CD0", "CDa", "CM0", "CMa", "CMq", "CRr", "CRp", "CNr"):
         c = cal["coefficients"][name]
         assert set(c) >= {"coverage_50", "coverage_90", "rank_uniformity_p"}

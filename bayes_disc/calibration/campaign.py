@@ -24,6 +24,7 @@ import contextlib
 import json
 import logging
 import os
+from collections import Counter
 from pathlib import Path
 
 from ..observation.config_io import ConfigError
@@ -155,6 +156,7 @@ def calibration_result(cal: CalConfig, records: list[dict]) -> dict:
     res.update({"name": cal.name, "requested": cal.replicates,
                 "failed": [{"index": r["index"], "error": r["error"]} for r in records if r["status"] != "ok"],
                 "not_converged": [r["index"] for r in ok if not r["convergence"]["converged"]],
+                "noise_chosen": dict(Counter(label for r in ok for label in r.get("noise", {}).values())),
                 "truth_draw": cal.truth.draw, "seed": cal.seed,
                 "wall_time_s_per_replicate": ([min(r["wall_time_s"] for r in ok),
                                                sum(r["wall_time_s"] for r in ok) / len(ok),

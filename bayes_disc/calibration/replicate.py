@@ -192,7 +192,8 @@ def run_replicate(cal: CalConfig, index: int) -> dict:
     dict
         The replicate record (JSON-ready): ``index``, ``status`` "ok", ``truth`` {name: value}, the
         :func:`rank_record` keys, ``convergence`` (the run's), ``sampler`` (:data:`SAMPLER_RECORD`),
-        ``redraws``, ``synth_seed``,
+        ``noise`` ({flight: the marker noise model the run used, its ``noise_choice`` label}), ``redraws``,
+        ``synth_seed``,
         ``sampler_seed``, ``host``, ``wall_time_s``; the defects injected (per flight, when any).
     """
     from ..api import sample
@@ -207,12 +208,13 @@ def run_replicate(cal: CalConfig, index: int) -> dict:
         chains = np.stack([posterior_draws(post, n) for n in cal.names], axis=-1)
         conv = res.convergence
         sampler = res.raw["sampler_settings"]
+        noise = {flight: r["label"] for flight, r in res.raw.get("noise_choice", {}).items()}
     rec = {"index": index, "status": "ok", "truth": truth,
            **rank_record(truth, chains, cal.names, float(conv["tau_max_steps"]), cal.draws,
                          np.random.default_rng([cal.seed, index, 1])),
            "convergence": {k: conv.get(k) for k in ("converged", "reason", "total_steps", "burn_in_steps",
                                                     "tau_max_steps", "r_hat_max", "ess_bulk_min_coefficient")},
-           "sampler": {k: sampler[k] for k in SAMPLER_RECORD},
+           "sampler": {k: sampler[k] for k in SAMPLER_RECORD}, "noise": noise,
            "redraws": redraws, "synth_seed": int(result.truth["seed"]), "sampler_seed": sampler_seed,
            "host": socket.gethostname(), "wall_time_s": time.perf_counter() - t0}
     defects = {f: v["defects"] for f, v in result.truth["flights"].items() if "defects" in v}

@@ -98,6 +98,11 @@ def calibration_sections(result: dict, figures_dir: Path) -> list[Section]:
             f"{fmt(bands['50'][0], 3)}–{fmt(bands['50'][1], 3)}, 90 % interval {fmt(bands['90'][0], 3)}–"
             f"{fmt(bands['90'][1], 3)}. sd of the standardised error z = (truth − posterior mean)/sd: 1 for intervals "
             f"of the right width, &gt; 1 too narrow (± {fmt(result.get('z_sd_se'), 2)} for N = {n}).</p>")
+    chosen = result.get("noise_chosen") or {}
+    if chosen:
+        lead += ("<p>Marker noise model the runs used, over all flights of the ranked replicates: "
+                 + ", ".join(f"{esc(label)} {count}" for label, count in sorted(chosen.items(), key=lambda x: -x[1]))
+                 + ".</p>")
     if family is not None:
         k = 2 * len(result["coefficients"])
         outside = sum(not (bands[lv][0] <= c[f"coverage_{lv}"] <= bands[lv][1])
