@@ -56,9 +56,8 @@ IC_SD = {"position": 0.5, "velocity": 5.0, "attitude": 0.5, "omega": 30.0}
 IC_PRIORS = ("reference", "flat")
 #: the default of ``prior.initial_conditions``: ``flat``, although at fixed truths on varied designs its
 #: pitching-moment coefficients sit off the truth and the reference prior's nearly do not (docs/validation.md):
-#: on four short flights with AR(1) noise and the weak prior the exact g rises by 13.6 nats within 3
-#: least-squares sds of the optimum along one direction, and the reference posterior sat far from the truth
-#: (docs/configuration.md)
+#: on four short flights with AR(1) noise and the weak prior a reference posterior sat far from the truth,
+#: where the surrogate of g stood 14.5 nats above the exact value (docs/how-it-works.md)
 IC_PRIOR_DEFAULT = "flat"
 
 
@@ -165,7 +164,8 @@ class ReferenceSurrogate:
     fitted inside would otherwise grow without bound where no design point lies), and g̃ is held within
     ``bounds``, the range of the exact values at the design points: between the design points, too, a polynomial
     can rise where nothing constrains it (four short flights with AR(1) noise: 34 nats above the exact g at 5.6
-    whitened units, which drew the sampler there, the likelihood 6.8 nats down). On the demo the terms in t
+    whitened units, which drew the sampler there, the likelihood 6.8 nats down; the bound still allows the
+    range's top there, 14.5 nats above the exact g, and the sampler went to it). On the demo the terms in t
     bring the error at held-out points from 0.43 to 0.13 nats rms (max 2.3 to 0.44): g is not quadratic along
     the pitching-moment ridge, where it rises by ~10 nats over 3 sds.
 
