@@ -104,7 +104,8 @@ def _cmd_predict(args) -> int:
 def _cmd_calibrate(args) -> int:
     from .calibration import load_cal_config, run_campaign
     cal = load_cal_config(args.config, output_override=args.output)
-    result = run_campaign(cal, scheduler=args.scheduler, workers=args.workers, progress=not args.no_progress)
+    result = run_campaign(cal, scheduler=args.scheduler, workers=args.workers, progress=not args.no_progress,
+                          summary_only=args.summary_only)
     if result["replicates"] == 0:
         logger.error(f"no replicate succeeded ({len(result['failed'])} failed; errors in {cal.output}/replicates/)")
         return 3
@@ -283,6 +284,8 @@ def _campaign_commands(sub, common) -> None:
                    help="worker processes of the local cluster (default 2; ignored with --scheduler)")
     p.add_argument("--output", metavar="DIR", help="override the campaign's output folder")
     p.add_argument("--no-progress", action="store_true", help="no progress bar (finished replicates are logged)")
+    p.add_argument("--summary-only", action="store_true",
+                   help="run no replicate: write calibration.json and the page from those already finished")
     p.set_defaults(func=_cmd_calibrate)
     p = sub.add_parser("compare", parents=[common],
                        help="PSIS-LOO comparison of sampled runs of the same flights (az.compare)",

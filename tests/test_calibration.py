@@ -178,7 +178,8 @@ def test_truths_drawn_from_an_around_prior_are_the_fits_prior():
 
 # ------------------------------------------------------------------------------- a campaign on Dask
 def test_tiny_campaign_on_two_workers_resumes_without_redoing(tmp_path, capsys):
-    """Two replicates, then three with replicate 0 deleted: only 0 and 2 run again; the keys of docs/outputs.md."""
+    """Two replicates; three asked for with --summary-only: nothing runs and the two are summarised; then three
+    with replicate 0 deleted: only 0 and 2 run again; the keys of docs/outputs.md."""
     p = tmp_path / "cal.yaml"
     p.write_text(TINY.format(n=2))
     assert main(["calibrate", str(p), "--workers", "2", "--no-progress"]) == 0
@@ -190,8 +191,13 @@ def test_tiny_campaign_on_two_workers_resumes_without_redoing(tmp_path, capsys):
     # the run's sampler settings are recorded, the configured ones and the defaults
     assert rec1["sampler"]["max_steps"] == 60 and rec1["sampler"]["independence_fraction"] == 0.8
     assert set(rec1["noise"]) == {"f1"} and rec1["noise"]["f1"] in NOISE_LABELS    # noise: auto, the default
-    files[0].unlink()
+    # three asked for, two finished: --summary-only runs nothing and summarises those two
     p.write_text(TINY.format(n=3))
+    assert main(["calibrate", str(p), "--workers", "2", "--no-progress", "--summary-only"]) == 0
+    summary = json.loads((out / "calibration.json").read_text())
+    assert (summary["replicates"], summary["requested"]) == (2, 3)
+    assert sorted(f.name for f in (out / "replicates").glob("replicate_*.json")) == [f.name for f in files]
+    files[0].unlink()
     capsys.readouterr()
     assert main(["calibrate", str(p), "--workers", "2", "--no-progress"]) == 0
     err = capsys.readouterr().err

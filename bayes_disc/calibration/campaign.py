@@ -165,7 +165,7 @@ def calibration_result(cal: CalConfig, records: list[dict]) -> dict:
 
 
 def run_campaign(cal: CalConfig, *, scheduler: str | None = None, workers: int = 2, progress: bool = True,
-                 report: bool = True) -> dict:
+                 report: bool = True, summary_only: bool = False) -> dict:
     """``bayes-disc calibrate``: run the missing replicates, then write calibration.json and the page.
 
     Parameters
@@ -180,6 +180,9 @@ def run_campaign(cal: CalConfig, *, scheduler: str | None = None, workers: int =
         Progress bar of finished replicates.
     report : bool
         Write ``calibration.html``.
+    summary_only : bool
+        Run nothing: summarise the replicates already finished (``requested`` still says how many the campaign
+        asks for).
 
     Returns
     -------
@@ -192,8 +195,8 @@ def run_campaign(cal: CalConfig, *, scheduler: str | None = None, workers: int =
     todo = pending(cal)
     where = f"on {scheduler}" if scheduler else f"on {workers} local worker{'s' if workers != 1 else ''}"
     logger.info(f"{cal.name}: {cal.replicates - len(todo)} of {cal.replicates} replicates already done, "
-                f"{len(todo)} to run {where}")
-    if todo:
+                + (f"{len(todo)} not run (summary only)" if summary_only else f"{len(todo)} to run {where}"))
+    if todo and not summary_only:
         with dask_client(scheduler, workers) as client:
             run_replicates(cal, todo, client, progress=progress)
     records = read_records(cal)
