@@ -39,6 +39,14 @@ CAMPAIGNS = [
     ("four_flights_per_point", "a quarter of every flight's samples 10× noisier and stated in `sigma_m`, "
                                "fitted with per-point errors"),
     ("four_flights_one_sigma", "the per-point campaign's data sets fitted with one σ per flight"),
+    ("four_flights_ar1_default", "the four flights with AR(1) marker noise ρ = 0.85, fitted with the default "
+                                 "`noise: auto`, seed 163 (short sampler settings: 2 ensembles, at most 400 steps)"),
+    ("four_flights_varied", "a varied design per replicate (a slow high-α throw, two fast low-α throws, a "
+                            "wobbling release; 1–3 mm white noise), the default prior of the initial conditions "
+                            "(`flat`); truths drawn around Hummel & Hubbard, fitted with the default coefficient prior "
+                            "(`potts_crowther`), so the ranks need not be uniform: coverage of truths the prior does "
+                            "not centre on, as a user's disc would be; seed 171, short sampler settings"),
+    ("four_flights_varied_reference", "the same 100 data sets fitted with `prior.initial_conditions: reference`"),
 ]
 #: campaigns that share template, prior and settings and differ only in their seed: pooled
 POOLS = [("white noise", ["four_flights_white", "four_flights_white_seed17"]),
@@ -110,6 +118,21 @@ def bands_line(n: int, cs: dict, z_se: float) -> str:
             f"sd of z ± {z_se:.3f}.")
 
 
+def partial_line(cal: dict) -> str:
+    """Says so when the campaign was stopped before all its replicates ran (summarised with --summary-only)."""
+    n, asked = cal["replicates"] + len(cal["failed"]), cal.get("requested", cal["replicates"])
+    return f"Stopped part-way: {n} of the {asked} replicates asked for were run. " if n < asked else ""
+
+
+def noise_line(cal: dict) -> str:
+    """How often each marker noise model was used over the campaign's flights (campaigns that record it)."""
+    chosen = cal.get("noise_chosen") or {}
+    if not chosen:
+        return ""
+    return ("Marker noise models used, over all flights: "
+            + ", ".join(f"{label} {count}" for label, count in sorted(chosen.items(), key=lambda x: -x[1])) + ". ")
+
+
 def sampler_line(recs: list[dict]) -> str:
     with_settings = [r for r in recs if "sampler" in r]
     steps = [r["convergence"]["total_steps"] for r in recs]
@@ -150,7 +173,7 @@ def section_calibration() -> list[str]:
         L += [f"### `{stem}`: {what}", "",
               f"Files: [`runs/calibration/{stem}.yaml`](../runs/calibration/{stem}.yaml), "
               f"`runs/calibration/{stem}/calibration.json` and `replicates/`. {sampler_line(recs)} "
-              + bands_line(n, cs, z_se), ""]
+              + partial_line(cal) + noise_line(cal) + bands_line(n, cs, z_se), ""]
         L += table(["coefficient", "50 % coverage", "90 % coverage", "rank p", "sd of z"], campaign_rows(cov, p, z, cs))
         L += ["", "Verdict: " + coverage_verdict(n, cs, z, z_se), ""]
     for title, stems in POOLS:
