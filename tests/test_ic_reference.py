@@ -54,6 +54,63 @@ def test_a_design_that_cannot_fix_the_quadratic_is_refused():
         fit_reference_surrogate(np.eye(3), np.zeros(3), np.zeros(3), np.eye(3), 3.0)
 
 
+def test_approximate_posterior_points_follow_the_surrogate_times_the_gaussian():
+    """A surrogate g̃(c) = a z₀ (z = L⁻¹(c − ĉ)) makes the approximate posterior exp(−½|z|² + a z₀) = N(a e₀, I):
+    the resampled points' whitened mean sits at a e₀ and their spread is about one; a candidate drawn twice
+    comes back once."""
+    from bayes_disc.inference.fitting.reference import approximate_posterior_points
+    n, a = 3, 1.5
+    L = np.diag([0.1, 2.0, 0.5])
+    s = ReferenceSurrogate(np.ones(n), np.linalg.inv(L), 0.0, np.array([a, 0.0, 0.0]), np.zeros((n, n)),
+                           np.array([1.0, 0.0, 0.0]), np.zeros(2), radius=50.0)
+    c = approximate_posterior_points(s, L, 300, np.random.default_rng(5))
+    z = (c - 1.0) @ np.linalg.inv(L).T
+    assert 200 <= len(c) == len(np.unique(c, axis=0)) <= 300
+    np.testing.assert_allclose(z.mean(axis=0), [a, 0.0, 0.0], atol=0.2)
+    np.testing.assert_allclose(z.std(axis=0), 1.0, atol=0.15)
+
+
+def _stand_in_reference(monkeypatch, g, n: int = 4):
+    """``build_ic_reference``'s module with its exact g replaced by ``g(c)`` (whitened units: ĉ = 0, identity
+    covariance; every deviance zero, so every point is kept), and the problem and least squares it reads."""
+    import types
+    import bayes_disc.inference.fitting.reference as reference
+    monkeypatch.setattr(reference, "exact_log_reference", lambda problem, ls, c: (float(g(c)), 0.0))
+    return reference, types.SimpleNamespace(n_coef=n), types.SimpleNamespace(theta=np.zeros(n), cov=np.eye(n))
+
+
+def test_a_surrogate_exact_where_its_posterior_goes_is_not_refined(monkeypatch):
+    """g a quadratic: the surrogate is exact, the first round's approximate-posterior points agree within the
+    tolerance, and no point joins the design."""
+    reference, problem, ls = _stand_in_reference(monkeypatch, lambda c: 0.4 * c[0] - 0.1 * c[1] ** 2 + 0.05 * c[0] * c[2])
+    s = reference.build_ic_reference(problem, ls, seed=3)
+    assert s.accuracy["refinement_rounds"] == 0 and s.accuracy["posterior_max_error"] < 1e-8
+    assert s.accuracy["design_points"] == 1 + 2 * 4 * len(reference.AXIS_RADII) + reference.RANDOM_POINTS
+
+
+def test_the_refinement_adds_points_where_the_posterior_goes_and_the_fit_follows(monkeypatch):
+    """g saturating along one axis (6 tanh(z₀/1.5)), which no polynomial of the design follows where the
+    posterior exp(−½|z|² + g) lies (z₀ ≈ 2–3): the refinement adds the points it drew there, and at fresh draws
+    of that exact posterior the refined surrogate's error is smaller than the design-only one's."""
+    def g(c):
+        return 6.0 * np.tanh(c[0] / 1.5) + 0.1 * c[1] ** 2
+    reference, problem, ls = _stand_in_reference(monkeypatch, g)
+    rng = np.random.default_rng(11)
+    z = 2.5 * rng.standard_normal((40000, 4))
+    log_w = -0.5 * np.sum(z * z, 1) * (1 - 1 / 2.5 ** 2) + np.array([g(c) for c in z])
+    w = np.exp(log_w - log_w.max())
+    fresh = z[rng.choice(len(z), 300, replace=False, p=w / w.sum())]
+    exact = np.array([g(c) for c in fresh])
+    monkeypatch.setattr(reference, "REFINE_ROUNDS", 0)
+    plain = reference.build_ic_reference(problem, ls, seed=3)
+    monkeypatch.setattr(reference, "REFINE_ROUNDS", 4)
+    refined = reference.build_ic_reference(problem, ls, seed=3)
+    assert refined.accuracy["refinement_rounds"] >= 1
+    assert refined.accuracy["design_points"] > plain.accuracy["design_points"]
+    error = {k: np.sqrt(np.mean((s(fresh) - exact) ** 2)) for k, s in (("plain", plain), ("refined", refined))}
+    assert error["plain"] > 1.0 and error["refined"] < 0.95 * error["plain"], error
+
+
 # -------------------------------------------------------------------------------- toy: Neyman–Scott by brute force
 T = np.linspace(0.0, 1.0, 12)
 SIGMA = 0.05
@@ -186,7 +243,7 @@ def test_the_log_prior_adds_the_surrogate_of_the_coefficients(two_flights):
 
 # --------------------------------------------------------------------------------------------- configuration
 @pytest.mark.parametrize("block, expected", [
-    ("prior: potts_crowther", ("potts_crowther", "flat")),                       # the default
+    ("prior: potts_crowther", ("potts_crowther", "reference")),                  # the default
     ("prior: {initial_conditions: reference}", ("potts_crowther", "reference")),
     ("prior: {coefficients: weak, initial_conditions: reference}", ("weak", "reference")),
     ("prior: {around: hummel2002, relative_sd: 0.2, initial_conditions: flat}", ("around", "flat")),

@@ -58,7 +58,7 @@ IC_PRIORS = ("reference", "flat")
 #: pitching-moment coefficients sit off the truth and the reference prior's nearly do not (docs/validation.md):
 #: on four short flights with AR(1) noise and the weak prior a reference posterior sat far from the truth,
 #: where the surrogate of g stood 14.5 nats above the exact value (docs/how-it-works.md)
-IC_PRIOR_DEFAULT = "flat"
+IC_PRIOR_DEFAULT = "reference"
 
 
 @dataclass(frozen=True)
