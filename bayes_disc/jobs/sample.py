@@ -394,13 +394,13 @@ def initial_condition_prior(problem, ls, cfg: RunConfig, out: Path, resume: bool
                 logger.warning(f"the reference prior's surrogate is off the exact value by {a['rms_error']:.2f} nats "
                                f"rms at held-out points, where the value varies by {a['sd_exact']:.2f}: the "
                                "coefficients' marginal follows the profile only roughly (weakly informative flights)")
-            if a["posterior_max_error"] > REFINE_TOLERANCE:
-                logger.warning(f"the reference prior's surrogate is still {a['posterior_max_error']:.2f} nats off the "
+            if a["posterior_rms_error"] > REFINE_TOLERANCE:
+                logger.warning(f"the reference prior's surrogate is still {a['posterior_rms_error']:.2f} nats rms off the "
                                f"exact value where its approximate posterior goes, after {a['refinement_rounds']} "
                                "rounds of refinement there: the exact factor varies faster than the surrogate follows")
             st.result = (f"surrogate within {a['rms_error']:.2f} nats rms ({a['max_error']:.2f} max) of the exact "
                          f"value at {a['points']} held-out points, where it varies by {a['sd_exact']:.2f} (sd); "
-                         f"within {a['posterior_max_error']:.2f} nats where its posterior goes, after "
+                         f"within {a['posterior_rms_error']:.2f} nats rms where its posterior goes, after "
                          f"{a['refinement_rounds']} rounds of refinement there")
     return problem.with_ic_reference(surrogate), {
         "initial_conditions": "reference",
