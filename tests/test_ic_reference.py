@@ -73,8 +73,8 @@ def test_a_design_that_cannot_fix_the_quadratic_is_refused():
 
 
 def test_approximate_posterior_points_follow_the_surrogate_times_the_gaussian():
-    """A surrogate g̃(c) = a z₀ (z = L⁻¹(c − ĉ)) makes the approximate posterior exp(−½|z|² + a z₀) = N(a e₀, I):
-    the resampled points' whitened mean sits at a e₀ and their spread is about one; a candidate drawn twice
+    """A surrogate g̃(c) = a z₀ (z = L⁻¹(c − ĉ)) makes the approximate posterior
+    exp(−½|z|² + a z₀) = N(a e₀, I): the resampled points' whitened mean sits at a e₀ and their spread is about one; a candidate drawn twice
     comes back once."""
     from bayes_disc.inference.fitting.reference import approximate_posterior_points
     n, a = 3, 1.5
@@ -100,7 +100,9 @@ def _stand_in_reference(monkeypatch, g, n: int = 4):
 def test_a_surrogate_exact_where_its_posterior_goes_is_not_refined(monkeypatch):
     """g a quadratic: the surrogate is exact, the first round's approximate-posterior points agree within the
     tolerance, and no point joins the design."""
-    reference, problem, ls = _stand_in_reference(monkeypatch, lambda c: 0.4 * c[0] - 0.1 * c[1] ** 2 + 0.05 * c[0] * c[2])
+    def g(c):
+        return 0.4 * c[0] - 0.1 * c[1] ** 2 + 0.05 * c[0] * c[2]
+    reference, problem, ls = _stand_in_reference(monkeypatch, g)
     s = reference.build_ic_reference(problem, ls, seed=3)
     assert s.accuracy["refinement_rounds"] == 0 and s.accuracy["posterior_rms_error"] < 1e-8
     assert s.accuracy["design_points"] == 1 + 2 * 4 * len(reference.AXIS_RADII) + reference.RANDOM_POINTS

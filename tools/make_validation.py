@@ -40,13 +40,14 @@ CAMPAIGNS = [
                                "fitted with per-point errors"),
     ("four_flights_one_sigma", "the per-point campaign's data sets fitted with one σ per flight"),
     ("four_flights_ar1_default", "the four flights with AR(1) marker noise ρ = 0.85, fitted with the default "
-                                 "`noise: auto`, seed 163 (short sampler settings: 2 ensembles, at most 400 steps)"),
+                                 "configuration (`noise: auto`, the reference prior of the initial conditions), "
+                                 "seed 163 (short sampler settings: 2 ensembles, at most 400 steps)"),
     ("four_flights_varied", "a varied design per replicate (a slow high-α throw, two fast low-α throws, a "
                             "wobbling release; 1–3 mm white noise), the default prior of the initial conditions "
-                            "(`flat`); truths drawn around Hummel & Hubbard, fitted with the default coefficient prior "
-                            "(`potts_crowther`), so the ranks need not be uniform: coverage of truths the prior does "
-                            "not centre on, as a user's disc would be; seed 171, short sampler settings"),
-    ("four_flights_varied_reference", "the same 100 data sets fitted with `prior.initial_conditions: reference`"),
+                            "(`reference`); truths drawn around Hummel & Hubbard, fitted with the default coefficient "
+                            "prior (`potts_crowther`), so the ranks need not be uniform: coverage of truths the prior "
+                            "does not centre on, as a user's disc would be; seed 171, short sampler settings"),
+    ("four_flights_varied_flat", "the same 100 data sets fitted with `prior.initial_conditions: flat`"),
 ]
 #: campaigns that share template, prior and settings and differ only in their seed: pooled
 POOLS = [("white noise", ["four_flights_white", "four_flights_white_seed17"]),
@@ -133,6 +134,14 @@ def noise_line(cal: dict) -> str:
             + ", ".join(f"{label} {count}" for label, count in sorted(chosen.items(), key=lambda x: -x[1])) + ". ")
 
 
+def ic_prior_line(stem: str) -> str:
+    """The prior of the initial conditions the campaign's runs used, from its recorded key (``campaign.json``):
+    the one its run settings name, else the default."""
+    prior = load(f"runs/calibration/{stem}/campaign.json")["run"].get("prior", {})
+    named = prior.get("initial_conditions") if isinstance(prior, dict) else None
+    return f"Prior of the initial conditions: {named or 'the default (reference)'}. "
+
+
 def sampler_line(recs: list[dict]) -> str:
     with_settings = [r for r in recs if "sampler" in r]
     steps = [r["convergence"]["total_steps"] for r in recs]
@@ -173,7 +182,7 @@ def section_calibration() -> list[str]:
         L += [f"### `{stem}`: {what}", "",
               f"Files: [`runs/calibration/{stem}.yaml`](../runs/calibration/{stem}.yaml), "
               f"`runs/calibration/{stem}/calibration.json` and `replicates/`. {sampler_line(recs)} "
-              + partial_line(cal) + noise_line(cal) + bands_line(n, cs, z_se), ""]
+              + partial_line(cal) + ic_prior_line(stem) + noise_line(cal) + bands_line(n, cs, z_se), ""]
         L += table(["coefficient", "50 % coverage", "90 % coverage", "rank p", "sd of z"], campaign_rows(cov, p, z, cs))
         L += ["", "Verdict: " + coverage_verdict(n, cs, z, z_se), ""]
     for title, stems in POOLS:

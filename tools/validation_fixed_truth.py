@@ -12,7 +12,7 @@ from validation_common import COEFFICIENTS, ROOT, fmt, table
 FOLDER = ROOT / "runs" / "calibration" / "fixed_truth"
 #: sd(z) of every coefficient must lie within 1 ± this
 SD_Z_TOLERANCE = 0.15
-PRIOR_WORDS = {"flat": "flat (default)", "reference": "reference"}
+PRIOR_WORDS = {"flat": "flat", "reference": "reference (default)"}
 
 
 def design_text(flights: list[dict]) -> str:

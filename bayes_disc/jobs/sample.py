@@ -395,9 +395,10 @@ def initial_condition_prior(problem, ls, cfg: RunConfig, out: Path, resume: bool
                                f"rms at held-out points, where the value varies by {a['sd_exact']:.2f}: the "
                                "coefficients' marginal follows the profile only roughly (weakly informative flights)")
             if a["posterior_rms_error"] > REFINE_TOLERANCE:
-                logger.warning(f"the reference prior's surrogate is still {a['posterior_rms_error']:.2f} nats rms off the "
-                               f"exact value where its approximate posterior goes, after {a['refinement_rounds']} "
-                               "rounds of refinement there: the exact factor varies faster than the surrogate follows")
+                logger.warning(f"the reference prior's surrogate is still {a['posterior_rms_error']:.2f} nats rms off "
+                               f"the exact value where its approximate posterior goes, after "
+                               f"{a['refinement_rounds']} rounds of refinement there: the exact factor varies faster "
+                               "than the surrogate follows")
             st.result = (f"surrogate within {a['rms_error']:.2f} nats rms ({a['max_error']:.2f} max) of the exact "
                          f"value at {a['points']} held-out points, where it varies by {a['sd_exact']:.2f} (sd); "
                          f"within {a['posterior_rms_error']:.2f} nats rms where its posterior goes, after "

@@ -11,16 +11,17 @@ flight's block out directly, :mod:`.arrow`). The initial conditions' wide Gaussi
 I_xx,f: the reference prior is the data's information.
 
 :func:`build_ic_reference` computes g at a design of coefficient points in the least-squares metric
-(:func:`.priors.reference_design`), fits the quadratic, then checks it where the posterior it makes will
-go: points drawn from the approximate posterior exp(−½|z|² + g̃(z)) in the whitened coefficients (the
-least-squares Gaussian, prior included, times the surrogate; :func:`approximate_posterior_points`). Where g̃
-is off the exact g there by more than :data:`REFINE_TOLERANCE` rms, the points join the design and the surrogate
-is fitted again, up to :data:`REFINE_ROUNDS` times (points drawn where the profile deviance exceeds
-:data:`MAX_DESIGN_DEVIANCE` are not checked: the likelihood leaves the posterior no mass there). The fit is
-Huber's (:data:`HUBER`), so that values far from g's trend do not bend it. A polynomial fitted to a fixed design can rise between or
-beyond the design points where g does not (four short flights with AR(1) noise: 14 nats above the exact g at
-5.5–6 least-squares sds, where the posterior went); the check looks exactly there. Finally the surrogate is
-measured at held-out points drawn as the random design points are.
+(:func:`.priors.reference_design`) and fits the surrogate by Huber's M-estimate (:data:`HUBER`: g is not smooth
+everywhere, and values far from its trend must not bend the polynomial). A polynomial fitted to a fixed design
+can still stand high between or beyond the design points where g does not (four short flights with AR(1)
+noise: 14 nats above the exact g at 5.5–6 least-squares sds, where the posterior went), so it is then checked
+where the posterior it makes will go: points drawn from the approximate posterior exp(−½|z|² + g̃(z)) in the
+whitened coefficients z (the least-squares Gaussian, prior included, times the surrogate;
+:func:`approximate_posterior_points`). Where g̃ is off the exact g there by more than :data:`REFINE_TOLERANCE`
+rms, the points join the design and the surrogate is fitted again, up to :data:`REFINE_ROUNDS` times (points
+drawn where the profile deviance exceeds :data:`MAX_DESIGN_DEVIANCE` are not checked: the likelihood leaves
+the posterior no mass there). Finally the surrogate is measured at held-out points drawn as the random design
+points are.
 """
 from __future__ import annotations
 
@@ -156,9 +157,9 @@ def exact_log_reference(problem: Problem, ls: LeastSquaresResult, c: np.ndarray)
 
 def approximate_posterior_points(surrogate: ReferenceSurrogate, factor: np.ndarray, k: int,
                                  rng: np.random.Generator) -> np.ndarray:
-    """Up to ``k`` distinct coefficient points drawn from the approximate posterior q(z) ∝ exp(−½|z|² + g̃(z)), z the
-    whitened coefficients (the least-squares Gaussian, prior included, times the surrogate prior), by importance
-    resampling of :data:`REFINE_CANDIDATES` draws of N(0, :data:`REFINE_SPREAD`² I).
+    """Up to ``k`` distinct coefficient points drawn from the approximate posterior q(z) ∝ exp(−½|z|² + g̃(z)),
+    z the whitened coefficients (the least-squares Gaussian, prior included, times the surrogate prior), by
+    importance resampling of :data:`REFINE_CANDIDATES` draws of N(0, :data:`REFINE_SPREAD`² I).
 
     Parameters
     ----------

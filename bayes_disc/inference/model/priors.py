@@ -165,9 +165,9 @@ class ReferenceSurrogate:
     can rise where nothing constrains it (four short flights with AR(1) noise: 34 nats above the exact g at 5.6
     whitened units, which drew the sampler there, the likelihood 6.8 nats down; the bound still allows the
     range's top there, 14.5 nats above the exact g: :func:`.fitting.reference.build_ic_reference` therefore
-    also checks g̃ where its own approximate posterior goes and refits it with those points). On the demo the terms in t
-    bring the error at held-out points from 0.43 to 0.13 nats rms (max 2.3 to 0.44): g is not quadratic along
-    the pitching-moment ridge, where it rises by ~10 nats over 3 sds.
+    also checks g̃ where its own approximate posterior goes and refits it with those points). On the demo the
+    terms in t bring the error at held-out points from 0.43 to 0.13 nats rms (max 2.3 to 0.44): g is not
+    quadratic along the pitching-moment ridge, where it rises by ~10 nats over 3 sds.
 
     Attributes
     ----------
