@@ -7,9 +7,10 @@ campaign's run settings under ``prior.initial_conditions`` ``reference`` and ``f
 seed). Printed after every draw, per prior: the mean over the draws of the truth's Mahalanobis distance² under
 the posterior mean and covariance of the ten coefficients (χ²₁₀ if the intervals are right: expected 10, band
 10 ± 2·√20/√K), and mean and sd over the draws of z_k = (θ̃_k − posterior mean_k)/posterior sd_k (sd(z) = 1
-when calibrated, within 1 ± 0.15 asked), and how many runs stopped unconverged. With ``--out`` the figures
-and every draw's distance², z and convergence are written as JSON (a new file: an existing one is not
-replaced); tools/make_validation.py reads such files from runs/calibration/fixed_truth/.
+when calibrated, within 1 ± 0.15 asked), and how many runs stopped unconverged. With ``--out`` the figures,
+every draw's distance², z and convergence, and how the reference prior's surrogate is fitted
+(``reference_surrogate``: Huber threshold, refinement rounds and tolerance) are written as JSON (a new file:
+an existing one is not replaced); tools/make_validation.py reads such files from runs/calibration/fixed_truth/.
 
     python benchmarks/bench_fixed_truth_posterior.py runs/calibration/four_flights_varied.yaml [--replicate 0]
                                                      [--draws 20] [--priors reference flat] [--out FILE]
@@ -32,6 +33,7 @@ sys.path.insert(0, str(ROOT))
 from bayes_disc.calibration.config import load_cal_config  # noqa: E402
 from bayes_disc.calibration.replicate import (draw_truth, jittered_flights, replicate_data,  # noqa: E402
                                               replicate_rng, replicate_run)
+from bayes_disc.inference.fitting import reference  # noqa: E402
 from bayes_disc.inference.model.config import config_from_mapping  # noqa: E402
 from bayes_disc.inference.results.draws import posterior_draws  # noqa: E402
 from bayes_disc.jobs.sample import run_sample  # noqa: E402
@@ -120,6 +122,8 @@ def main(argv=None) -> int:
                           for f in flights]
         out["per_draw"] = {ic: {"distance2": np.round(d2[ic], 4).tolist(), "z": np.round(zs[ic], 4).tolist(),
                                 "converged": conv[ic]} for ic in a.priors}
+        out["reference_surrogate"] = {"huber": reference.HUBER, "refine_rounds": reference.REFINE_ROUNDS,
+                                      "refine_tolerance": reference.REFINE_TOLERANCE}
         out["command"] = (f"python benchmarks/bench_fixed_truth_posterior.py {a.campaign.as_posix()} --replicate "
                           f"{a.replicate} --draws {a.draws} --priors {' '.join(a.priors)}")
         a.out.parent.mkdir(parents=True, exist_ok=True)

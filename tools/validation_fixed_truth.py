@@ -80,6 +80,13 @@ def section_fixed_truth() -> list[str]:
     L += ["", f"mean z per coefficient (0 ± 2/√K ≈ {fmt(2 / np.sqrt(k_min), 2)} when unbiased):", ""]
     L += table(["design", "prior"] + COEFFICIENTS,
                [[str(r["replicate"]), p] + [fmt(r[p]["mean_z"][c], 2) for c in COEFFICIENTS] for r in found for p in priors])
+    unrecorded = [str(r["replicate"]) for r in found if "reference" in r and "reference_surrogate" not in r]
+    if unrecorded:
+        L += ["", f"The files of design(s) {', '.join(unrecorded)} do not record how the reference prior's "
+              "surrogate was fitted (`reference_surrogate`): their runs used a surrogate fitted by plain least "
+              "squares, without the check where its posterior goes; `sample` fits it by Huber's estimate and "
+              "refines it there ([how it works](how-it-works.md#3-priors)). Their reference-prior figures describe "
+              "that surrogate; the command below recomputes them with the one `sample` builds."]
     L += ["", "Reproduce:", "", "```bash"] + [r["command"] + " --out FILE" for r in found] + ["```", ""]
     words = []
     for p in priors:
