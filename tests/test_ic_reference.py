@@ -74,8 +74,8 @@ def test_a_design_that_cannot_fix_the_quadratic_is_refused():
 
 def test_approximate_posterior_points_follow_the_surrogate_times_the_gaussian():
     """A surrogate g̃(c) = a z₀ (z = L⁻¹(c − ĉ)) makes the approximate posterior
-    exp(−½|z|² + a z₀) = N(a e₀, I): the resampled points' whitened mean sits at a e₀ and their spread is about one; a candidate drawn twice
-    comes back once."""
+    exp(−½|z|² + a z₀) = N(a e₀, I): the resampled points' whitened mean sits at a e₀ and their spread is about
+    one; a candidate drawn twice comes back once."""
     from bayes_disc.inference.fitting.reference import approximate_posterior_points
     n, a = 3, 1.5
     L = np.diag([0.1, 2.0, 0.5])
