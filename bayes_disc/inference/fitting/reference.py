@@ -184,23 +184,13 @@ def approximate_posterior_points(surrogate: ReferenceSurrogate, factor: np.ndarr
     return c[pick]
 
 
-class _ExactValues:
-    """Exact g and profile deviance at coefficient points, counted for ``progress(done, total)``."""
-
-    def __init__(self, problem: Problem, ls: LeastSquaresResult, total: int, progress=None):
-        self.problem, self.ls, self.total, self.progress, self.done = problem, ls, total, progress, 0
-
-    def __call__(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        values, deviance = np.empty(len(points)), np.empty(len(points))
-        for j, c in enumerate(points):
-            values[j], deviance[j] = exact_log_reference(self.problem, self.ls, c)
-            self.done += 1
-            if self.progress is not None:
-                self.progress(self.done, self.total)
-        return values, deviance
+def _exact_values(problem: Problem, ls: LeastSquaresResult, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(m,) exact g and (m,) profile deviance at coefficient points (m, n_coef) (:func:`exact_log_reference`)."""
+    out = np.array([exact_log_reference(problem, ls, c) for c in points], float).reshape(-1, 2)
+    return out[:, 0], out[:, 1]
 
 
-def build_ic_reference(problem: Problem, ls: LeastSquaresResult, seed: int, progress=None) -> ReferenceSurrogate:
+def build_ic_reference(problem: Problem, ls: LeastSquaresResult, seed: int) -> ReferenceSurrogate:
     """The surrogate of g fitted to exact values at a design of coefficient points, refined where its
     approximate posterior goes and measured at held-out ones (module docstring).
 
@@ -211,8 +201,6 @@ def build_ic_reference(problem: Problem, ls: LeastSquaresResult, seed: int, prog
         The least-squares optimum: the design is centred on it and scaled by its coefficients' covariance.
     seed : int
         Seed of the random design, refinement and held-out points.
-    progress : callable, optional
-        ``progress(done, total)`` after each exact value (``total`` counts every refinement round).
 
     Returns
     -------
@@ -235,14 +223,13 @@ def build_ic_reference(problem: Problem, ls: LeastSquaresResult, seed: int, prog
     L = scaled_cholesky(ls.cov[:n, :n])   # the coefficients' metric (floored where it is numerically singular)
     design = ls.theta[:n] + reference_design(n, AXIS_RADII, RANDOM_POINTS, RANDOM_SPREAD, rng) @ L.T
     held = ls.theta[:n] + RANDOM_SPREAD * rng.standard_normal((HELD_OUT, n)) @ L.T
-    exact = _ExactValues(problem, ls, len(design) + len(held) + REFINE_ROUNDS * REFINE_POINTS, progress)
-    values, deviance = exact(design)
+    values, deviance = _exact_values(problem, ls, design)
     points, values, left_out = _kept(design, values, deviance)
     surrogate = fit_reference_surrogate(points, values, ls.theta[:n], L, TRUST_RADIUS, HUBER)
     rounds, error = 0, np.inf
     for _ in range(REFINE_ROUNDS):
         new = approximate_posterior_points(surrogate, L, REFINE_POINTS, rng)
-        new_values, new_deviance = exact(new)
+        new_values, new_deviance = _exact_values(problem, ls, new)
         near = new_deviance <= MAX_DESIGN_DEVIANCE
         e = surrogate(new[near]) - new_values[near]
         error = float(np.sqrt(np.mean(e * e))) if e.size else 0.0
@@ -252,8 +239,7 @@ def build_ic_reference(problem: Problem, ls: LeastSquaresResult, seed: int, prog
         points, values, left_out = np.vstack([points, kept]), np.concatenate([values, kept_values]), left_out + out
         surrogate = fit_reference_surrogate(points, values, ls.theta[:n], L, TRUST_RADIUS, HUBER)
         rounds += 1
-    exact.total = exact.done + len(held)
-    held_values, held_deviance = exact(held)
+    held_values, held_deviance = _exact_values(problem, ls, held)
     check, check_values, out = _kept(held, held_values, held_deviance)
     accuracy = {**surrogate_accuracy(surrogate, check, check_values), "design_points": int(len(points)),
                 "left_out": left_out + out, "refinement_rounds": rounds, "posterior_rms_error": error}
