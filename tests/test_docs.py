@@ -172,6 +172,54 @@ def test_documentation_links_resolve(tmp_path):
     assert broken_links(page) == ["nope.md", "#no-such-heading"]
 
 
+def test_package_and_example_reports_never_cite_the_internal_specification(tmp_path):
+    """Users have no "SPEC": no module of the package and no shipped example report cites it; the check
+    catches a planted citation."""
+    def citing(paths):
+        return [p.name for p in paths if re.search(r"\bSPEC\b", p.read_text(encoding="utf-8"))]
+    files = sorted((REPO / "bayes_disc").rglob("*.py")) + sorted((REPO / "docs" / "examples").glob("*.html"))
+    assert len(files) > 50
+    assert citing(files) == []
+    planted = tmp_path / "planted.html"
+    planted.write_text("<p>Rate coefficients are per rad/s, as in SPEC §2.</p>", encoding="utf-8")
+    assert citing(files[:3] + [planted]) == ["planted.html"]
+
+
+#: a documented command of a job on a shipped run configuration, with its options
+JOB_COMMAND = re.compile(r"bayes-disc (sample|diagnose|identifiability) (runs/[^\s`<>]+\.yaml)([^`&;\n]*)")
+#: the file each job writes into its output folder (the folder holding it refuses the job without --overwrite)
+JOB_RESULT = {"sample": "summary.json", "diagnose": "diagnosis.json", "identifiability": "identifiability.json"}
+
+
+def unsafe_reproduce_commands(text: str, tracked: set) -> list[str]:
+    """Documented job commands whose output folder holds a committed result of the same job but which carry
+    neither ``--overwrite`` nor ``--output``: on a fresh checkout the job refuses them."""
+    bad = []
+    for job, config, options in JOB_COMMAND.findall(text):
+        path = REPO / config
+        output = (yaml.safe_load(path.read_text()) or {}).get("output", "out")
+        result = (path.parent / output / JOB_RESULT[job]).relative_to(REPO).as_posix()
+        if result in tracked and "--overwrite" not in options and "--output" not in options:
+            bad.append(f"bayes-disc {job} {config}{options.rstrip()}")
+    return bad
+
+
+def test_reproduce_commands_replace_committed_results_explicitly():
+    """Every documented command that reruns a job whose results are committed in the run folder says
+    ``--overwrite`` (the job refuses a folder with an earlier job's results otherwise); a command without it is
+    caught."""
+    import subprocess
+    tracked = set(subprocess.run(["git", "ls-files"], cwd=REPO, capture_output=True, text=True,
+                                 check=True).stdout.split())
+    pages = [REPO / "README.md", *sorted((REPO / "docs").glob("*.md")), REPO / "docs" / "examples" / "README.md"]
+    bad = {p.relative_to(REPO).as_posix(): b for p in pages
+           if (b := unsafe_reproduce_commands(p.read_text(encoding="utf-8"), tracked))}
+    assert not bad, bad
+    assert unsafe_reproduce_commands("`bayes-disc diagnose runs/concealed/config.yaml`", tracked) == [
+        "bayes-disc diagnose runs/concealed/config.yaml"]
+    assert unsafe_reproduce_commands("`bayes-disc diagnose runs/concealed/config.yaml --overwrite`", tracked) == []
+
+
 def test_help_texts_speak_to_users():
     """``--help`` of every command: no reference to the internal specification ("SPEC §")."""
     from bayes_disc.cli import build_parser

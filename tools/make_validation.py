@@ -270,7 +270,7 @@ def section_recovery() -> list[str]:
         ["", f"Verdict: {verdict} (for calibrated intervals, at least {int(expected)} of {n} with probability "
              f"97.5 %). The coverage over hundreds of data sets is in the next section.", "",
          "Reproduce: `bayes-disc sample runs/concealed/config.yaml` then `bayes-disc diagnose "
-         "runs/concealed/config.yaml`. The demo itself (`bayes-disc sample runs/demo/config.yaml`) writes "
+         "runs/concealed/config.yaml --overwrite` (replacing the committed diagnosis). The demo itself (`bayes-disc sample runs/demo/config.yaml`) writes "
          "`runs/demo/out/summary.json`, which is not committed; `python tools/make_validation.py --recovery "
          "runs/demo/out runs/demo/truth.json` prints this table for it.", ""]
 
@@ -313,8 +313,9 @@ def section_identifiability() -> list[str]:
               "guarantee when the model misfits (next sections): on these throws the fold-to-fold spread, not the "
               "verdict, is the honest measure.**"
           + launch_speeds(post, fold_ls), "",
-          "Reproduce: `bayes-disc identifiability runs/flatball/config.yaml` (after `sample`), and per fold "
-          "`bayes-disc identifiability runs/flatball/loo/<throw>/fit.yaml`.", ""]
+          "Reproduce: `bayes-disc identifiability runs/flatball/config.yaml --overwrite` (after `sample`), and per "
+          "fold `bayes-disc identifiability runs/flatball/loo/<throw>/fit.yaml --overwrite` (`--overwrite` replaces "
+          "the committed results).", ""]
     return L
 
 
@@ -405,8 +406,10 @@ def section_missing_physics() -> list[str]:
           + f"; RMS after / noise {min(r[4] for r in rows)}–{max(r[4] for r in rows)}"
           + ("; residuals still structured, as expected for a form the family does not contain."
              if not ld.get("white") else "."), "",
-          "Reproduce: `bayes-disc sample runs/concealed/config.yaml && bayes-disc diagnose runs/concealed/config.yaml`; "
-          "`bayes-disc diagnose runs/concealed_nature/config.yaml --no-sample`. The test suite's blind tests "
+          "Reproduce (`--overwrite` replaces the committed diagnosis): `bayes-disc sample "
+          "runs/concealed/config.yaml && bayes-disc diagnose runs/concealed/config.yaml --overwrite`; "
+          "`bayes-disc diagnose runs/concealed_nature/config.yaml --no-sample --overwrite`. The test suite's blind "
+          "tests "
           "(`tests/test_missing_physics.py`, `tests/test_families.py`, `tests/test_discrepancy.py`; slow ones with "
           "`-m slow`) cover every term, both data explanations, ten data sets with nothing missing and a gust.", ""]
     return L
@@ -496,9 +499,11 @@ def section_real() -> list[str]:
           f"Verdict: the misfit is within {max(ratios):.1f}× the noise floor.", "",
           f"Reproduce (the committed runs took {load('runs/flatball/out/run_info.json')['wall_time_s'] / 60:.0f} min "
           f"for `sample` and {diag['wall_time_s'] / 60:.0f} min for `diagnose` on two shared cores): "
-          "`bayes-disc sample runs/flatball/config.yaml`, `bayes-disc diagnose runs/flatball/config.yaml "
-          f"--no-sample{' --no-learn' if not ld else ''}`, and per fold `bayes-disc identifiability runs/flatball/loo/<throw>/fit.yaml` then "
-          "`bayes-disc predict runs/flatball/loo/<throw>/held.yaml --from runs/flatball/loo/<throw>/out_fit`.", ""]
+          "`bayes-disc sample runs/flatball/config.yaml --overwrite`, `bayes-disc diagnose runs/flatball/config.yaml "
+          f"--no-sample{' --no-learn' if not ld else ''} --overwrite`, and per fold `bayes-disc identifiability "
+          "runs/flatball/loo/<throw>/fit.yaml --overwrite` then `bayes-disc predict "
+          "runs/flatball/loo/<throw>/held.yaml --from runs/flatball/loo/<throw>/out_fit --overwrite` "
+          "(`--overwrite` replaces the committed results).", ""]
     return L
 
 

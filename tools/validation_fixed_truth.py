@@ -13,6 +13,9 @@ FOLDER = ROOT / "runs" / "calibration" / "fixed_truth"
 #: sd(z) of every coefficient must lie within 1 ± this
 SD_Z_TOLERANCE = 0.15
 PRIOR_WORDS = {"flat": "flat", "reference": "reference (default)"}
+#: the label of reference-prior figures from a file that records no ``reference_surrogate`` (runs whose surrogate
+#: was fitted by plain least squares, without the check where its posterior goes)
+PLAIN_SURROGATE = "reference, plain surrogate"
 
 
 def design_text(flights: list[dict]) -> str:
@@ -24,6 +27,14 @@ def design_text(flights: list[dict]) -> str:
             s += f" p, q {f['p']:+.1f}, {f['q']:+.1f} rad/s".replace("-", "−")
         parts.append(s)
     return "; ".join(parts)
+
+
+def prior_label(result: dict, prior: str) -> str:
+    """How a file's figures under ``prior`` are named: the default reference prior, the reference prior with the
+    plain least-squares surrogate (files without ``reference_surrogate``), or flat."""
+    if prior == "reference" and "reference_surrogate" not in result:
+        return PLAIN_SURROGATE
+    return PRIOR_WORDS[prior]
 
 
 def judge(fig: dict) -> tuple[bool, list[str]]:
@@ -41,31 +52,35 @@ def section_fixed_truth() -> list[str]:
          "ten coefficients averages 10 (χ² with 10 degrees of freedom), and every coefficient's "
          "z = (truth − posterior mean)/posterior sd has sd 1 ± 0.15 — on varied four-flight designs (a slow "
          "high-α throw, two fast low-α throws and a wobbling release, 1–3 mm marker noise) with the default "
-         "coefficient prior, under either prior of the initial conditions.", ""]
+         "coefficient prior and the default (reference) prior of the initial conditions.", ""]
     if not found:
         L += ["No result files of this measurement are committed, so this page states no numbers for it.", "",
               "Measured by `python benchmarks/bench_fixed_truth_posterior.py "
               "runs/calibration/four_flights_varied.yaml --replicate I --draws 50 --out FILE`.", "",
               "Verdict: not established by committed files.", ""]
         return L
-    priors = [p for p in PRIOR_WORDS if all(p in r for r in found)]
-    rows, verdicts = [], {p: [] for p in priors}
-    for r in found:
-        for p in priors:
-            fig = r[p]
-            ok_d2, off = judge(fig)
-            worst = max(COEFFICIENTS, key=lambda c: abs(fig["mean_z"][c]))
-            verdicts[p].append(ok_d2 and not off)
-            rows.append([str(r["replicate"]), PRIOR_WORDS[p], str(r["draws"]),
-                         f"{fmt(fig['mean_distance2'])} [{fmt(fig['band'][0])}, {fmt(fig['band'][1])}]",
-                         "yes" if ok_d2 else "**no**", ", ".join(off) or "none",
-                         f"{worst} {fmt(fig['mean_z'][worst], 2)}", str(fig["not_converged"])])
+    found.sort(key=lambda r: (r["replicate"], "reference_surrogate" in r))
+    entries = [(r, p, prior_label(r, p)) for r in found for p in PRIOR_WORDS if p in r]
+    rows, verdicts = [], {}
+    for r, p, label in entries:
+        fig = r[p]
+        ok_d2, off = judge(fig)
+        worst = max(COEFFICIENTS, key=lambda c: abs(fig["mean_z"][c]))
+        verdicts.setdefault(label, []).append(ok_d2 and not off)
+        rows.append([str(r["replicate"]), label, str(r["draws"]),
+                     f"{fmt(fig['mean_distance2'])} [{fmt(fig['band'][0])}, {fmt(fig['band'][1])}]",
+                     "yes" if ok_d2 else "**no**", ", ".join(off) or "none",
+                     f"{worst} {fmt(fig['mean_z'][worst], 2)}", str(fig["not_converged"])])
     L += ["Each design is one replicate of `runs/calibration/four_flights_varied.yaml`: a truth drawn around "
           "Hummel & Hubbard (sd 0.1·|value|) and jittered launches, then the marker noise drawn again and again "
-          "(synthesis seeds 5000 …) and every data set sampled under each prior of the initial conditions (same "
-          "data, same sampler seed; [the priors](configuration.md)). The band is 10 ± 2·√(20/K) for K draws.", ""]
+          "(synthesis seeds 5000 …) and every data set sampled under each prior of the initial conditions the "
+          "file holds (same data, same sampler seed; [the priors](configuration.md)). The band is 10 ± 2·√(20/K) "
+          "for K draws.", ""]
     L += ["Designs (launch speed and angle of attack per flight):", ""]
-    L += [f"- design {r['replicate']}: {design_text(r['flights'])}" for r in found]
+    seen = {}
+    for r in found:
+        seen.setdefault(r["replicate"], r["flights"])
+    L += [f"- design {i}: {design_text(flights)}" for i, flights in seen.items()]
     L += [""]
     L += table(["design", "initial-condition prior", "draws", "mean distance² [band]", "in band",
                 "sd(z) outside 1 ± 0.15", "largest mean z", "unconverged runs"], rows)
@@ -76,24 +91,21 @@ def section_fixed_truth() -> list[str]:
           f"1/√(2(K − 1)) = {fmt(1 / np.sqrt(2 * (k_min - 1)), 2)}, so ± 0.15 is about "
           f"{fmt(0.15 * np.sqrt(2 * (k_min - 1)), 2)} standard errors):", ""]
     L += table(["design", "prior"] + COEFFICIENTS,
-               [[str(r["replicate"]), p] + [fmt(r[p]["sd_z"][c], 3) for c in COEFFICIENTS] for r in found for p in priors])
+               [[str(r["replicate"]), label] + [fmt(r[p]["sd_z"][c], 3) for c in COEFFICIENTS]
+                for r, p, label in entries])
     L += ["", f"mean z per coefficient (0 ± 2/√K ≈ {fmt(2 / np.sqrt(k_min), 2)} when unbiased):", ""]
     L += table(["design", "prior"] + COEFFICIENTS,
-               [[str(r["replicate"]), p] + [fmt(r[p]["mean_z"][c], 2) for c in COEFFICIENTS] for r in found for p in priors])
-    unrecorded = [str(r["replicate"]) for r in found if "reference" in r and "reference_surrogate" not in r]
-    if unrecorded:
-        L += ["", f"The files of design(s) {', '.join(unrecorded)} do not record how the reference prior's "
-              "surrogate was fitted (`reference_surrogate`): their runs used a surrogate fitted by plain least "
-              "squares, without the check where its posterior goes; `sample` fits it by Huber's estimate and "
-              "refines it there ([how it works](how-it-works.md#3-priors)). Their reference-prior figures describe "
-              "that surrogate; the command below recomputes them with the one `sample` builds."]
+               [[str(r["replicate"]), label] + [fmt(r[p]["mean_z"][c], 2) for c in COEFFICIENTS]
+                for r, p, label in entries])
+    if any(label == PLAIN_SURROGATE for _, _, label in entries):
+        L += ["", f"*{PLAIN_SURROGATE}*: files that do not record how the reference prior's surrogate was fitted "
+              "(`reference_surrogate`) come from runs whose surrogate was fitted by plain least squares, without "
+              "the check where its posterior goes; `sample` fits it by Huber's estimate and refines it there "
+              "([how it works](how-it-works.md#3-priors)). *reference (default)* is the surrogate `sample` "
+              "builds."]
     L += ["", "Reproduce:", "", "```bash"] + [r["command"] + " --out FILE" for r in found] + ["```", ""]
-    words = []
-    for p in priors:
-        n_ok = sum(verdicts[p])
-        words.append(f"with the {PRIOR_WORDS[p]} prior of the initial conditions the claim holds on {n_ok} of "
-                     f"{len(found)} designs")
-    L += ["Verdict: " + "; ".join(words) + ". " +
+    words = [f"{label}: the claim holds on {sum(v)} of {len(v)} designs" for label, v in verdicts.items()]
+    L += ["Verdict: by prior of the initial conditions — " + "; ".join(words) + ". " +
           ("A design where it fails shows intervals that do not yet cover as they claim at that truth."
            if not all(all(v) for v in verdicts.values()) else "Established on these designs."), ""]
     return L

@@ -2,7 +2,7 @@
 
 Writes ``<output>/identifiability.json``:
 
-    {"CL0": {"verdict", "reason"}, ..., (SPEC §6: one entry per coefficient)
+    {"CL0": {"verdict", "reason"}, ..., (docs/outputs.md: one entry per coefficient)
      "coefficients": {name: {verdict, reason, sd, prior_sd, contraction, relative_sd, ...}},
      "envelope": {"flights": {flight: {alpha_deg, speed_m_s, spin_rad_s}}, "set": {...},
                   "alpha_histogram": {"edges_deg", "counts"}},

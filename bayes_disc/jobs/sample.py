@@ -527,7 +527,7 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
     Returns
     -------
     dict
-        The content of ``summary.json`` (SPEC §6): ``parameters`` ({name: {mean, sd, q05, q50, q95, r_hat,
+        The content of ``summary.json`` (docs/outputs.md): ``parameters`` ({name: {mean, sd, q05, q50, q95, r_hat,
         ess_bulk}}, coefficients dimensionless, ``sigma_<flight>`` in m, initial conditions in SI units),
         ``convergence`` and the run's description.
 
