@@ -133,6 +133,41 @@ def test_the_refinement_brings_the_surrogate_to_g_where_its_posterior_goes(monke
     assert before > 3.0 and after < 0.5 * before, (before, after)
 
 
+def _check_draws(n_draws: int = 4000, n: int = 3):
+    """Posterior draws (n_draws, n + 2) of a stand-in run: the coefficients N(0, I), two other columns."""
+    return np.random.default_rng(4).standard_normal((n_draws, n + 2))
+
+
+def test_the_check_at_draws_finds_no_shift_where_the_surrogate_is_exact(monkeypatch):
+    """g̃ = g: every weight equal, no shift, nothing reported."""
+    def g(c):
+        return 0.3 * c[0] - 0.2 * c[1] * c[2]
+    reference, problem, ls = _stand_in_reference(monkeypatch, g, n=3)
+    surrogate = type("S", (), {"__call__": lambda self, c: np.array([g(ci) for ci in np.atleast_2d(c)])})()
+    check = reference.check_at_draws(problem, ls, surrogate, _check_draws(), np.random.default_rng(0),
+                                     ["a", "b", "c"])
+    assert check.draws == reference.CHECK_DRAWS and check.pareto_k is None
+    assert check.rms_error < 1e-12 and check.largest_shift < 1e-12 and not check.moves_intervals
+
+
+def test_the_check_at_draws_measures_the_shift_the_exact_prior_makes(monkeypatch):
+    """g − g̃ = 0.5·c₀ on N(0, I) draws: the exact prior's posterior is N(0.5, 1) in c₀ (exponential tilting),
+    so the weighted mean and quantiles move by about half a posterior sd, the other coefficients do not move,
+    and the shift is reported; a tilt of 0.02·c₀ is not."""
+    for slope, moves in ((0.5, True), (0.02, False)):
+        reference, problem, ls = _stand_in_reference(monkeypatch, lambda c, s=slope: s * c[0], n=3)
+        zero = type("S", (), {"__call__": lambda self, c: np.zeros(np.atleast_2d(c).shape[0])})()
+        check = reference.check_at_draws(problem, ls, zero, _check_draws(), np.random.default_rng(0),
+                                         ["a", "b", "c"], draws=2000)
+        assert abs(check.mean_shift["a"] - slope) < 0.1, check.mean_shift
+        assert abs(check.quantile_shift["a"] - slope) < 0.15, check.quantile_shift
+        assert abs(check.mean_shift["b"]) < 0.1 and abs(check.mean_shift["c"]) < 0.1
+        assert abs(check.reweighted["a"]["q50"] - slope) < 0.15, check.reweighted
+        assert check.pareto_k is not None and check.pareto_k < reference.CHECK_PARETO_K_MAX
+        assert check.moves_intervals is moves, check.to_dict()
+        assert json.loads(json.dumps(check.to_dict()))["moves_intervals"] is moves
+
+
 # -------------------------------------------------------------------------------- toy: Neyman–Scott by brute force
 T = np.linspace(0.0, 1.0, 12)
 SIGMA = 0.05
@@ -308,3 +343,25 @@ def test_summary_records_the_initial_conditions_prior(tmp_path, monkeypatch, ic)
     if ic == "reference":
         a = record["surrogate_accuracy"]
         assert a["points"] >= 20 and a["design_points"] >= 100 and a["rms_error"] < a["sd_exact"]
+        check = record["posterior_check"]
+        assert check["made"] and check["draws"] > 0 and set(check["mean_shift"]) == set(summary["coefficients"])
+        assert check["rms_error"] >= 0 and isinstance(check["moves_intervals"], bool)
+    else:
+        assert "posterior_check" not in record
+
+
+def test_the_report_says_whether_the_exact_prior_would_move_the_intervals():
+    """The appendix row: the check's figures; where reweighting moves a coefficient's quantiles beyond the
+    tolerance, that coefficient's exact-prior interval; a resumed run says it was not checked."""
+    from bayes_disc.report.content import _ic_prior_text
+    base = {"initial_conditions": "reference", "description": "d"}
+    check = {"made": True, "draws": 200, "rms_error": 0.4, "largest_shift": 0.46, "shift_tolerance": 0.1,
+             "pareto_k": 0.02, "moves_intervals": True, "mean_shift": {"CM0": -0.12, "CL0": 0.02},
+             "sd_ratio": {"CM0": 0.8, "CL0": 1.01},
+             "reweighted": {"CM0": {"q05": -0.07, "q50": -0.06, "q95": -0.05}, "CL0": {"q05": 0, "q50": 0, "q95": 0}}}
+    text = _ic_prior_text({**base, "posterior_check": check})
+    assert "0.40 nats" in text and "0.46 posterior sd" in text and "CM0 median -0.06" in text and "CL0" not in text
+    calm = _ic_prior_text({**base, "posterior_check": {**check, "moves_intervals": False, "largest_shift": 0.03}})
+    assert "the intervals are the exact prior's" in calm and "CM0" not in calm
+    assert "not checked" in _ic_prior_text({**base, "posterior_check": {"made": False, "why": "resumed run"}})
+    assert _ic_prior_text({"initial_conditions": "flat", "description": "wide"}) == "flat: wide"

@@ -21,7 +21,7 @@ from __future__ import annotations
 import json
 import logging
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -30,8 +30,6 @@ from ..inference.model.config import RunConfig
 from ..inference.model.data import build_problem
 from ..inference.model.describe import data_words, flight_info, noise_info, noise_words
 from ..inference.model.inertial import load_run_throws
-from ..inference.model.priors import surrogate_from_dict
-from ..inference.fitting.reference import REFINE_TOLERANCE, build_ic_reference
 from ..inference.fitting.leastsq import START_FLIGHTS, fit_least_squares, noise_text
 from ..inference.fitting.profile import MAX_LOWER_REFITS, lowest_point, profiles_through_lowest
 from ..inference.sampling.proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
@@ -47,6 +45,7 @@ from ..inference.sampling.mixing import n_walkers
 from ..inference.sampling.sampler import run_sampler
 from ..inference.results.versions import software_versions
 from ..observation.config_io import ConfigError
+from .ic_prior import check_initial_condition_prior, initial_condition_prior
 from .outputs import Outcome, build_run_report
 from .progress import RESULT, stage
 
@@ -55,10 +54,6 @@ logger = logging.getLogger(__name__)
 RUN_KEY = "run_key.json"
 #: sampler settings that may change on resume (the stopping rule, the cap, parallelism)
 RESUMABLE_SETTINGS = ("max_steps", "check_every", "min_steps", "n_tau", "rhat", "ess", "processes")
-#: the conditional reference prior's surrogate of a run (``prior.initial_conditions: reference``), read on resume
-IC_REFERENCE = "ic_reference.json"
-#: a surrogate whose held-out rms error exceeds this share of the exact value's spread is reported (a warning)
-POOR_SURROGATE = 0.1
 #: least-squares files a resume reuses
 LEAST_SQUARES_FILES = ("least_squares.json", "least_squares_theta.npy", "least_squares_cov.npy")
 
@@ -291,7 +286,7 @@ def posterior_approximation(problem, ls, processes: int, out: Path, progress: bo
     with_prior : callable, optional
         ``with_prior(problem, ls) -> problem``: the problem whose posterior the proposal is built for, from the
         optimum the profiles went through (the initial conditions' reference prior,
-        :func:`initial_condition_prior`); default: ``problem`` as given.
+        :func:`.ic_prior.initial_condition_prior`); default: ``problem`` as given.
 
     Returns
     -------
@@ -346,70 +341,6 @@ def posterior_approximation(problem, ls, processes: int, out: Path, progress: bo
     return proposal, ls
 
 
-def initial_condition_prior(problem, ls, cfg: RunConfig, out: Path, resume: bool):
-    """The problem with the initial conditions' prior of ``prior.initial_conditions``: for ``reference`` the
-    conditional reference prior's surrogate (:func:`bayes_disc.inference.fitting.reference.build_ic_reference`),
-    built and written to ``ic_reference.json``, or read back from it on resume; for ``flat`` the problem as is.
-
-    Parameters
-    ----------
-    problem : Problem
-        The problem sampled.
-    ls : LeastSquaresResult or None
-        Its least-squares optimum (None on resume).
-    cfg : RunConfig
-    out : Path
-        The run folder.
-    resume : bool
-        Read the saved surrogate instead of building it.
-
-    Returns
-    -------
-    problem : Problem
-    record : dict
-        summary.json's ``initial_condition_prior``: ``initial_conditions`` and, for ``reference``, the
-        surrogate's accuracy at held-out points and the file.
-
-    Raises
-    ------
-    ConfigError
-        On resume of a ``reference`` run whose ``ic_reference.json`` is missing.
-    """
-    if cfg.ic_prior == "flat":
-        return problem, {"initial_conditions": "flat",
-                         "description": "independent wide Gaussians around the data-derived starts"}
-    path = out / IC_REFERENCE
-    if resume:
-        if not path.is_file():
-            raise ConfigError(cfg.path, "prior.initial_conditions", f"cannot resume: {path} is missing, so the "
-                              "reference prior the chains were sampled with is unknown (run without --resume)")
-        surrogate = surrogate_from_dict(json.loads(path.read_text()))
-    else:
-        with stage("reference prior", "the initial conditions' conditional reference prior at design points of "
-                                      "the coefficients") as st:
-            surrogate = build_ic_reference(problem, ls, cfg.sampler.seed)
-            path.write_text(json.dumps(surrogate.to_dict(), indent=1))
-            a = surrogate.accuracy
-            if a["rms_error"] > POOR_SURROGATE * a["sd_exact"]:
-                logger.warning(f"the reference prior's surrogate is off the exact value by {a['rms_error']:.2f} nats "
-                               f"rms at held-out points, where the value varies by {a['sd_exact']:.2f}: the "
-                               "coefficients' marginal follows the profile only roughly (weakly informative flights)")
-            if a["posterior_rms_error"] > REFINE_TOLERANCE:
-                logger.warning(f"the reference prior's surrogate is still {a['posterior_rms_error']:.2f} nats rms off "
-                               f"the exact value where its approximate posterior goes, after "
-                               f"{a['refinement_rounds']} rounds of refinement there: the exact factor varies faster "
-                               "than the surrogate follows")
-            st.result = (f"surrogate within {a['rms_error']:.2f} nats rms ({a['max_error']:.2f} max) of the exact "
-                         f"value at {a['points']} held-out points, where it varies by {a['sd_exact']:.2f} (sd); "
-                         f"within {a['posterior_rms_error']:.2f} nats rms where its posterior goes, after "
-                         f"{a['refinement_rounds']} rounds of refinement there")
-    return problem.with_ic_reference(surrogate), {
-        "initial_conditions": "reference",
-        "description": "wide Gaussians around the data-derived starts times the conditional reference prior "
-                       "|I_xx,f(c)|^(1/2) of every flight's initial conditions given the coefficients",
-        "surrogate_accuracy": dict(surrogate.accuracy), "file": IC_REFERENCE}
-
-
 def _resume_message(name: str, steps: list) -> str:
     n = max(steps)
     text = (f"resuming {name} from step {n} of each ensemble (ensembles at {', '.join(map(str, steps))} steps")
@@ -438,12 +369,23 @@ def _read_problem(cfg: RunConfig, out: Path, resume: bool):
     return throws, raw, problem
 
 
-def _prepare_sampling(cfg: RunConfig, problem, out: Path, resume: bool, progress: bool):
+@dataclass
+class Prepared:
+    """What sampling starts from (:func:`_prepare_sampling`)."""
+
+    raw: object            # Problem as read, with its noise models (None on resume)
+    problem: object        # Problem sampled: robust flights cleaned, with the initial conditions' prior
+    ls_dict: dict          # least-squares record
+    proposal: object       # proposal (None on resume: the sampler reads the one saved with its chains)
+    steps: list | None     # saved steps on resume, else None
+    ic: dict               # summary.json's ``initial_condition_prior``
+    ls: object = None      # LeastSquaresResult the initial conditions' prior was built at (None on resume)
+
+
+def _prepare_sampling(cfg: RunConfig, problem, out: Path, resume: bool, progress: bool) -> Prepared:
     """Before sampling: on resume, the saved chains' step counts and least squares (the proposals are saved
     with the chains); otherwise least squares, the choice of noise models, the robust fit, the profiles and
-    their proposal. Returns (problem as read with its noise models, problem sampled (robust flights
-    cleaned, with the initial conditions' prior), least-squares record, proposal or None, saved steps or None,
-    summary.json's ``initial_condition_prior``)."""
+    their proposal."""
     if resume and (out / "chains" / RUN_KEY).is_file():
         check_same_run(cfg, problem, out)       # before counting chain files: the ensembles may differ
     steps = saved_steps(out, cfg.sampler.ensembles) if resume else None
@@ -461,7 +403,7 @@ def _prepare_sampling(cfg: RunConfig, problem, out: Path, resume: bool, progress
             logger.info(f"resume: reusing the saved least-squares optimum (cost {ls_dict['cost']:.1f}) and the "
                         "proposals saved with the chains")
         problem, ic = initial_condition_prior(problem, None, cfg, out, resume=True)
-        return None, problem, ls_dict, None, steps, ic    # the sampler continues with the approximation saved beside its chains
+        return Prepared(None, problem, ls_dict, None, steps, ic)   # the sampler continues with the saved proposals
     ls, ls_dict = _least_squares(problem, cfg, out)
     problem, ls, ls_dict = _noise_choice(problem, ls, ls_dict, cfg, out)
     raw = problem
@@ -470,13 +412,14 @@ def _prepare_sampling(cfg: RunConfig, problem, out: Path, resume: bool, progress
 
     def with_prior(p, optimum):
         chosen["problem"], chosen["ic"] = initial_condition_prior(p, optimum, cfg, out, resume=False)
+        chosen["ls"] = optimum
         return chosen["problem"]
     proposal, ls = posterior_approximation(problem, ls, cfg.sampler.processes, out, progress=progress,
                                            max_nfev=cfg.least_squares.max_nfev, with_prior=with_prior)
     problem, ic = chosen["problem"], chosen["ic"]
     (out / "chains").mkdir(exist_ok=True)
     (out / "chains" / RUN_KEY).write_text(json.dumps(run_key(cfg, problem), indent=1))
-    return raw, problem, ls.to_dict(), proposal, None, ic
+    return Prepared(raw, problem, ls.to_dict(), proposal, None, ic, chosen["ls"])
 
 
 def _write_outputs(cfg: RunConfig, problem, chains, ls_dict: dict, throws, steps, out: Path, t0: float, ic: dict):
@@ -540,16 +483,18 @@ def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> d
     out = Path(cfg.output)
     out.mkdir(parents=True, exist_ok=True)
     throws, raw, problem = _read_problem(cfg, out, resume)
-    chosen, problem, ls_dict, proposal, steps, ic = _prepare_sampling(cfg, problem, out, resume, progress)
-    raw = raw if chosen is None else chosen
+    prep = _prepare_sampling(cfg, problem, out, resume, progress)
+    problem, steps = prep.problem, prep.steps
+    raw = raw if prep.raw is None else prep.raw
     s = cfg.sampler
     with stage("sampling", f"{s.ensembles} ensembles × {n_walkers(s, problem)} walkers until R-hat < {s.rhat:g}, "
                            f"ESS ≥ {s.ess:g}, N/τ ≥ {s.n_tau:g} (cap {s.max_steps} steps)") as st:
-        chains = run_sampler(problem, proposal, cfg.sampler, out, resume=steps is not None, progress=progress)
+        chains = run_sampler(problem, prep.proposal, cfg.sampler, out, resume=steps is not None, progress=progress)
         st.result = f"{chains.reason} at step {chains.total_steps}"
     if robust_flights(raw):
         _average_over_judgement(raw, problem, chains, cfg, out)
-    summary, run_info = _write_outputs(cfg, problem, chains, ls_dict, throws, steps, out, t0, ic)
+    check_initial_condition_prior(problem, prep.ls, chains, cfg, prep.ic)
+    summary, run_info = _write_outputs(cfg, problem, chains, prep.ls_dict, throws, steps, out, t0, prep.ic)
     logger.info(format_table(summary), extra=RESULT)
     c = summary["convergence"]
     logger.info(f"{c['reason']}: {c['total_steps']} steps × {c['walkers_per_ensemble']} walkers × {c['ensembles']} "

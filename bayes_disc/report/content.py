@@ -95,6 +95,7 @@ def appendix_section(ctx) -> Section:
                                    f"{conv['ensembles']} ensembles = {n_kept}"),
         ("burn-in", f"{conv['burn_in_steps']} of {conv['total_steps']} steps"),
         ("prior", f"{s['prior']['name']}: {s['prior']['description']}"),
+        ("prior of the initial conditions", _ic_prior_text(s.get("initial_condition_prior") or {})),
         ("physics terms beyond the ten-coefficient model", ", ".join(s.get("physics_terms") or []) or "none"),
         ("truth file", "yes (synthetic data; truths overlaid)" if ctx.truth_coefficients else "no"),
         ("wall time of the run", f"{info['wall_time_s']:.0f} s" if "wall_time_s" in info else "–"),
@@ -120,6 +121,30 @@ def appendix_section(ctx) -> Section:
                    "How the result was produced: files, prior, sampler settings, the least-squares start and "
                    "the software versions.", html)
 
+
+
+def _ic_prior_text(record: dict) -> str:
+    """summary.json's ``initial_condition_prior`` in words: the prior and, for ``reference``, how closely its
+    surrogate followed the exact prior at the posterior's draws and what the exact prior would change."""
+    if not record:
+        return "–"
+    text = f"{record['initial_conditions']}: {record['description']}"
+    check = record.get("posterior_check")
+    if not check or not check.get("made"):
+        return text + (f" (not checked at the posterior's draws: {check['why']})" if check else "")
+    text += (f". At {check['draws']} posterior draws the surrogate the sampler used is within "
+             f"{check['rms_error']:.2f} nats rms of the exact prior; reweighting the draws to the exact prior moves "
+             f"the coefficients' means and sds by at most {check['largest_shift']:.2f} posterior sd")
+    if not check["moves_intervals"]:
+        return text + " (the intervals are the exact prior's)"
+    if not check["reweighted"]:
+        return text + (f", and its weights cannot be trusted (Pareto k̂ {check['pareto_k']:.2f}): the intervals "
+                       "follow the surrogate")
+    moved = [n for n in check["mean_shift"] if max(abs(check["mean_shift"][n]), abs(check["sd_ratio"][n] - 1.0))
+             > check["shift_tolerance"]]
+    return text + ("; the intervals follow the surrogate. Under the exact prior: " + "; ".join(
+        f"{n} median {check['reweighted'][n]['q50']:.4g}, 90 % {check['reweighted'][n]['q05']:.4g} … "
+        f"{check['reweighted'][n]['q95']:.4g}" for n in moved))
 
 
 def _lower_optimum_rows(ls: dict) -> list[tuple[str, str]]:
