@@ -163,9 +163,8 @@ def coverage_tables(entries: list, verdicts: dict) -> list[str]:
     fw = {lv: binomial_band(k_min, int(lv) / 100, familywise_mass(2 * len(COEFFICIENTS))) for lv in ("50", "90")}
     L = ["", "Coverage at the fixed truth. The intervals `sample` reports are the posterior's quantiles, so the direct "
          "check of them is where the truth falls among the posterior draws: its posterior quantile u, uniform on "
-         "(0, 1) when the intervals cover as they claim, whatever the posterior's shape (z assumes a Gaussian one; "
-         "along CM0 and CMq the posterior is skewed: [how it works](how-it-works.md#3-priors)). Coverage of the "
-         "central 50 % and 90 % intervals over the "
+         "(0, 1) when the intervals cover as they claim, whatever the posterior's shape (z assumes a Gaussian "
+         "posterior; u does not). Coverage of the central 50 % and 90 % intervals over the "
          f"{k_min} draws (95 % bands {fmt(band['50'][0])}–{fmt(band['50'][1])} and "
          f"{fmt(band['90'][0])}–{fmt(band['90'][1])}; family-wise over the 20, "
          f"{fmt(fw['50'][0])}–{fmt(fw['50'][1])} and {fmt(fw['90'][0])}–{fmt(fw['90'][1])}), and the sd of "

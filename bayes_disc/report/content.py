@@ -136,7 +136,7 @@ def _ic_prior_text(record: dict) -> str:
              f"{check['rms_error']:.2f} nats rms of the exact prior; reweighting the draws to the exact prior moves "
              f"the coefficients' means and sds by at most {check['largest_shift']:.2f} posterior sd")
     if not check["moves_intervals"]:
-        return text + " (the intervals are the exact prior's)"
+        return text + " (under the exact prior the intervals stand within that)"
     if not check["reweighted"]:
         return text + (f", and its weights cannot be trusted (Pareto k̂ {check['pareto_k']:.2f}): the intervals "
                        "follow the surrogate")
