@@ -168,6 +168,26 @@ def test_the_check_at_draws_measures_the_shift_the_exact_prior_makes(monkeypatch
         assert json.loads(json.dumps(check.to_dict()))["moves_intervals"] is moves
 
 
+def test_the_check_at_draws_weighs_singular_draws_zero_and_leaves_failed_fits_out(monkeypatch):
+    """Where a flight's information is singular (g = −inf) the exact prior's density is zero: those draws weigh
+    nothing; where a conditional fit fails the draw is left out; neither stops the check. Here the singular
+    draws are those with c₀ > 1, so the exact prior's posterior is N(0, 1) cut there: its mean moves down."""
+    import bayes_disc.inference.fitting.reference as reference
+    reference, problem, ls = _stand_in_reference(monkeypatch, lambda c: 0.0, n=3)
+
+    def exact(problem, ls, c):
+        if c[1] > 1.5:
+            raise RuntimeError("the conditional fit failed")
+        return (-np.inf if c[0] > 1.0 else 0.0), 0.0
+    monkeypatch.setattr(reference, "exact_log_reference", exact)
+    zero = type("S", (), {"__call__": lambda self, c: np.zeros(np.atleast_2d(c).shape[0])})()
+    check = reference.check_at_draws(problem, ls, zero, _check_draws(), np.random.default_rng(0), ["a", "b", "c"],
+                                     draws=1000)
+    assert check.failed > 30 and check.singular > 100, check.to_dict()
+    assert check.mean_shift["a"] < -0.2 and check.moves_intervals
+    assert "singular" in check.text() and "failed" in check.text()
+
+
 # -------------------------------------------------------------------------------- toy: Neyman–Scott by brute force
 T = np.linspace(0.0, 1.0, 12)
 SIGMA = 0.05

@@ -285,6 +285,11 @@ class SurrogateCheck:
     ----------
     draws : int
         Posterior draws checked (a random subset of the run's).
+    singular : int
+        Of them, draws where a flight's information is singular: the exact prior's density is zero there, so
+        their weight is zero.
+    failed : int
+        Draws whose conditional fit failed: left out of the check.
     rms_error, max_error : float
         rms and largest |g̃ − g| at them [nats], each relative to the mean difference (a constant offset does
         not change the posterior).
@@ -304,6 +309,8 @@ class SurrogateCheck:
     """
 
     draws: int
+    singular: int
+    failed: int
     rms_error: float
     max_error: float
     pareto_k: float | None
@@ -337,6 +344,8 @@ class SurrogateCheck:
     def text(self) -> str:
         """One line for the log."""
         k = "weights equal" if self.pareto_k is None else f"Pareto k̂ {self.pareto_k:.2f}"
+        k += f"; {self.singular} draws singular, weight zero" if self.singular else ""
+        k += f"; {self.failed} conditional fits failed, left out" if self.failed else ""
         return (f"at {self.draws} posterior draws the surrogate is within {self.rms_error:.2f} nats rms "
                 f"({self.max_error:.2f} max) of the exact reference prior; reweighting them to the exact prior "
                 f"moves the coefficients' means and sds by at most {self.largest_shift:.2f} posterior sd ({k})")
@@ -371,23 +380,27 @@ def check_at_draws(problem: Problem, ls: LeastSquaresResult, surrogate: Referenc
     Raises
     ------
     RuntimeError
-        A conditional fit failed, or g is not finite at a checked draw.
+        Every checked draw's conditional fit failed or is singular (nothing to weigh).
     """
     import arviz as az
     n = problem.n_coef
     pick = np.sort(rng.choice(theta.shape[0], size=min(draws, theta.shape[0]), replace=False))
     c = theta[pick, :n]
-    exact = np.array([exact_log_reference(problem, ls, ci)[0] for ci in c])
-    if not np.all(np.isfinite(exact)):
-        raise RuntimeError("the initial conditions' information is singular at some posterior draws: the "
-                           "reference prior is undefined there")
-    log_w = exact - surrogate(c)
+    exact = np.array([_exact_or_nan(problem, ls, ci) for ci in c])
+    failed = np.isnan(exact)
+    c, exact = c[~failed], exact[~failed]
+    finite = np.isfinite(exact)                       # −inf: a singular flight, the exact prior's density is zero
+    if not np.any(finite):
+        raise RuntimeError(f"the reference prior could not be checked: at {int(failed.sum())} of {len(pick)} "
+                           "posterior draws the conditional fit failed, at the others the information is singular")
+    log_w = exact[finite] - surrogate(c[finite])
     e = log_w - log_w.mean()
+    w = np.zeros(c.shape[0])
     if np.ptp(log_w) > 1e-9:
         smoothed, k = az.psislw(log_w - log_w.max())
-        w, k = np.exp(smoothed - np.logaddexp.reduce(smoothed)), float(k)
+        w[finite], k = np.exp(smoothed - np.logaddexp.reduce(smoothed)), float(k)
     else:
-        w, k = np.full(c.shape[0], 1.0 / c.shape[0]), None
+        w[finite], k = 1.0 / np.sum(finite), None
     mean, sd = c.mean(axis=0), c.std(axis=0)
     w_mean = w @ c
     w_sd = np.sqrt(w @ (c - w_mean) ** 2)
@@ -398,9 +411,19 @@ def check_at_draws(problem: Problem, ls: LeastSquaresResult, surrogate: Referenc
     reliable = k is None or k <= CHECK_PARETO_K_MAX
     reweighted = {m: dict(zip(("q05", "q50", "q95"), weighted_quantiles(c[:, i], w, q).tolist()))
                   for i, m in enumerate(names)} if reliable else {}
-    return SurrogateCheck(draws=int(c.shape[0]), rms_error=float(np.sqrt(np.mean(e * e))),
+    return SurrogateCheck(draws=int(len(pick)), singular=int(np.sum(~finite)), failed=int(failed.sum()),
+                          rms_error=float(np.sqrt(np.mean(e * e))),
                           max_error=float(np.max(np.abs(e))), pareto_k=k, ess=float(1.0 / np.sum(w * w)),
                           mean_shift=dict(zip(names, ((w_mean - mean) / sd).tolist())),
                           sd_ratio=dict(zip(names, (w_sd / sd).tolist())),
                           quantile_shift=dict(zip(names, np.asarray(shift, float).tolist())),
                           reweighted=reweighted)
+
+
+def _exact_or_nan(problem: Problem, ls: LeastSquaresResult, c: np.ndarray) -> float:
+    """g at coefficients ``c`` (:func:`exact_log_reference`; −inf where a flight's information is singular), NaN
+    where the conditional fit fails."""
+    try:
+        return exact_log_reference(problem, ls, c)[0]
+    except RuntimeError:
+        return float("nan")
