@@ -329,7 +329,7 @@ class SurrogateCheck:
     @property
     def reliable(self) -> bool:
         """The weights can be trusted (k̂ ≤ :data:`CHECK_PARETO_K_MAX` or all equal)."""
-        return self.pareto_k is None or self.pareto_k <= CHECK_PARETO_K_MAX
+        return _trusted(self.pareto_k)
 
     @property
     def moves_intervals(self) -> bool:
@@ -408,9 +408,8 @@ def check_at_draws(problem: Problem, ls: LeastSquaresResult, surrogate: Referenc
     q = [0.05, 0.5, 0.95]
     shift = [np.max(np.abs(weighted_quantiles(c[:, i], w, q) - weighted_quantiles(c[:, i], equal, q))) / sd[i]
              for i in range(n)]
-    reliable = k is None or k <= CHECK_PARETO_K_MAX
     reweighted = {m: dict(zip(("q05", "q50", "q95"), weighted_quantiles(c[:, i], w, q).tolist()))
-                  for i, m in enumerate(names)} if reliable else {}
+                  for i, m in enumerate(names)} if _trusted(k) else {}
     return SurrogateCheck(draws=int(len(pick)), singular=int(np.sum(~finite)), failed=int(failed.sum()),
                           rms_error=float(np.sqrt(np.mean(e * e))),
                           max_error=float(np.max(np.abs(e))), pareto_k=k, ess=float(1.0 / np.sum(w * w)),
@@ -427,3 +426,8 @@ def _exact_or_nan(problem: Problem, ls: LeastSquaresResult, c: np.ndarray) -> fl
         return exact_log_reference(problem, ls, c)[0]
     except RuntimeError:
         return float("nan")
+
+
+def _trusted(pareto_k: float | None) -> bool:
+    """Importance weights with this Pareto k̂ can be trusted (None: all equal)."""
+    return pareto_k is None or pareto_k <= CHECK_PARETO_K_MAX
