@@ -8,8 +8,13 @@ when given). Printed every five fits: mean and sd over the fits of z = (θ̃ −
 In the linear regime, with the noise model's whitening exact and the optimum found, sd(z) ≤ 1 (the prior can
 only shrink it); equal z's at ``--scale 1`` and ``--scale 0.1`` (same seeds) show the regime is linear.
 
+``--out FILE`` (a new file) keeps every fit's optimum and Laplace sd of the coefficients. The noise draws are
+those of benchmarks/bench_fixed_truth_posterior.py (same seeds), so the two files pair draw by draw: the
+validation page compares the posterior's z with the least-squares z of the same data
+(tools/validation_fixed_truth.py).
+
     python benchmarks/bench_fixed_truth.py runs/calibration/four_flights_ar1.yaml [--replicate 0] [--fits 40]
-                                           [--scale 1.0] [--fix-rho 0.85]
+                                           [--scale 1.0] [--fix-rho 0.85] [--out FILE]
 """
 from __future__ import annotations
 
@@ -42,7 +47,10 @@ def main(argv=None) -> int:
     ap.add_argument("--fits", type=int, default=40)
     ap.add_argument("--scale", type=float, default=1.0, help="factor on every flight's noise_mm")
     ap.add_argument("--fix-rho", type=float, default=None, help="hold the AR(1) coefficients at this value")
+    ap.add_argument("--out", type=Path, help="write every fit's optimum and Laplace sd here (a new file)")
     a = ap.parse_args(argv)
+    if a.out is not None and a.out.exists():
+        raise SystemExit(f"{a.out} exists: give a new file (it is not replaced)")
     cal = load_cal_config(a.campaign)
     rng = replicate_rng(cal, a.replicate)          # the replicate's own stream: sampler seed, truth, launches
     sampler_seed = int(rng.integers(2 ** 20))
@@ -52,7 +60,7 @@ def main(argv=None) -> int:
     # the stream above is replicate_data's first draw; a replicate whose first truth failed to simulate was redrawn
     if replicate_data(cal, a.replicate)[1] != truth:
         raise SystemExit(f"replicate {a.replicate} was redrawn: its truth is not the stream's first draw")
-    zs = []
+    zs, optima, sds = [], [], []
     for k in range(a.fits):
         spec = replace(cal.template, name=f"fixed_{a.replicate}", flights=flights,
                        coefficients=Coefficients.from_mapping(truth), seed=5000 + k)
@@ -69,12 +77,26 @@ def main(argv=None) -> int:
                 x0[held] = a.fix_rho
                 ls = refine_least_squares(p, x0, max_nfev=cfg.least_squares.max_nfev, free=~held)
         idx = [p.names.index(n) for n in names]
-        zs.append((np.array([truth[n] for n in names]) - ls.theta[idx]) / np.sqrt(np.diag(ls.cov))[idx])
+        optima.append(ls.theta[idx])
+        sds.append(np.sqrt(np.diag(ls.cov))[idx])
+        zs.append((np.array([truth[n] for n in names]) - optima[-1]) / sds[-1])
         z = np.array(zs)
         if (k + 1) % 5 == 0:
             print(json.dumps({"replicate": a.replicate, "scale": a.scale, "fits": k + 1,
                               "mean_z": dict(zip(names, z.mean(0).round(2).tolist())),
                               "sd_z": dict(zip(names, z.std(0, ddof=1).round(2).tolist()))}), flush=True)
+    if a.out is not None:
+        command = (f"python benchmarks/bench_fixed_truth.py {a.campaign.as_posix()} --replicate {a.replicate} "
+                   f"--fits {a.fits}" + (f" --scale {a.scale}" if a.scale != 1.0 else "")
+                   + (f" --fix-rho {a.fix_rho}" if a.fix_rho is not None else ""))
+        head = json.dumps({"campaign": cal.name, "replicate": a.replicate, "fits": a.fits, "scale": a.scale,
+                           "fix_rho": a.fix_rho, "truth": truth, "synth_seeds": [5000, 5000 + a.fits - 1],
+                           "command": command}, indent=1)
+
+        def rows(values):   # one draw per line, ten significant digits
+            return ",\n  ".join(json.dumps([float(f"{v:.10g}") for v in row]) for row in values)
+        a.out.write_text(head[:-2] + ',\n "per_draw": {\n "theta": [\n  ' + rows(optima) + '],\n "laplace_sd": [\n  '
+                         + rows(sds) + "]}\n}\n")
     return 0
 
 

@@ -34,3 +34,22 @@ def test_coverages_outside_the_family_wise_band_are_named():
     assert V.coverage_judgement(fig, 150) == []
     fig["coverage_90"] = {**fig["coverage_90"], "CRp": 0.77, "CRr": 0.85}
     assert V.coverage_judgement(fig, 150) == ["CRp 90 %"]
+
+
+def test_paired_figures_recover_a_posterior_narrower_than_the_laplace_approximation():
+    """Least-squares optima scattering at their Laplace sd (z_LS ~ N(0, 1)) and a posterior whose mean is the
+    optimum but whose sd is 0.8 of the Laplace sd: z_post = z_LS / 0.8, so the slope is 1.25 and the
+    least-squares sd(z) about 1; a coefficient whose posterior equals the Laplace approximation has slope 1."""
+    rng = np.random.default_rng(5)
+    k, n = 400, 3
+    truth = np.array([1.0, -2.0, 0.5])
+    laplace_sd = np.tile([0.1, 0.2, 0.05], (k, 1))
+    optima = truth + rng.standard_normal((k, n)) * laplace_sd
+    z_ls = (truth - optima) / laplace_sd
+    z_post = z_ls / np.array([0.8, 1.0, 1.0])
+    fig = V.paired_figures(z_post, optima, laplace_sd, truth)
+    assert np.allclose(fig["slope"], [1.25, 1.0, 1.0])
+    assert np.allclose(fig["correlation"], 1.0)
+    assert np.all(np.abs(fig["sd_z_ls"] - 1.0) < 0.1), fig["sd_z_ls"]
+    wider = V.paired_figures(z_ls * 0.7 + 0.3 * rng.standard_normal((k, n)), optima, laplace_sd, truth)
+    assert np.all(np.abs(wider["slope"] - 0.7) < 0.06) and np.all(wider["correlation"] < 0.95)

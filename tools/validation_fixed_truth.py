@@ -1,15 +1,16 @@
 """The fixed-truth section of docs/validation.md: the posterior's intervals at one truth with only the noise
 redrawn, on designs of the varied four-flight template (benchmarks/bench_fixed_truth_posterior.py writes the
-files read here, runs/calibration/fixed_truth/*.json)."""
+files read here, runs/calibration/fixed_truth/*.json), and the least-squares fits of the same data
+(benchmarks/bench_fixed_truth.py, runs/calibration/fixed_truth/least_squares/*.json)."""
 from __future__ import annotations
 
 import json
-
 import numpy as np
 
 from validation_common import COEFFICIENTS, ROOT, binomial_band, familywise_mass, fmt, table
 
 FOLDER = ROOT / "runs" / "calibration" / "fixed_truth"
+LEAST_SQUARES = FOLDER / "least_squares"
 #: sd(z) of every coefficient must lie within 1 ± this
 SD_Z_TOLERANCE = 0.15
 PRIOR_WORDS = {"flat": "flat", "reference": "reference (default)"}
@@ -138,13 +139,20 @@ def section_fixed_truth() -> list[str]:
     coverage_verdicts = {}
     if with_u:
         L += coverage_tables(with_u, coverage_verdicts)
+    fits = {(f["campaign"], f["replicate"]): f
+            for f in (json.loads(path.read_text()) for path in sorted(LEAST_SQUARES.glob("*.json")))}
+    paired = [(r, fits[r["campaign"], r["replicate"]]) for r, p, label in entries
+              if label == PRIOR_WORDS["reference"] and (r["campaign"], r["replicate"]) in fits]
+    if paired:
+        L += least_squares_tables(paired)
     if any(label == PLAIN_SURROGATE for _, _, label in entries):
         L += ["", f"*{PLAIN_SURROGATE}*: files that do not record how the reference prior's surrogate was fitted "
               "(`reference_surrogate`) come from runs whose surrogate was fitted by plain least squares, without "
               "the check where its posterior goes; `sample` fits it by Huber's estimate and refines it there "
               "([how it works](how-it-works.md#3-priors)). *reference (default)* is the surrogate `sample` "
               "builds."]
-    L += ["", "Reproduce:", "", "```bash"] + [r["command"] + " --out FILE" for r in found] + ["```", ""]
+    L += ["", "Reproduce:", "", "```bash"] + [r["command"] + " --out FILE" for r in found]
+    L += [f["command"] + " --out FILE" for f in fits.values()] + ["```", ""]
     words = [f"{label}: the sd(z) criterion holds on {sum(v)} of {len(v)} designs" for label, v in verdicts.items()]
     words += [f"{label}: every interval's coverage inside its family-wise band on {sum(v)} of {len(v)} designs"
               for label, v in coverage_verdicts.items()]
@@ -182,4 +190,74 @@ def coverage_tables(entries: list, verdicts: dict) -> list[str]:
     outside = [(r["replicate"], coverage_judgement(r[p], r["draws"])) for r, p, _ in entries]
     L += ["", "Outside the family-wise band: " + "; ".join(f"design {d}: {', '.join(o) or 'none'}"
                                                           for d, o in outside) + "."]
+    return L
+
+
+def paired_figures(z_post: np.ndarray, optima: np.ndarray, laplace_sd: np.ndarray, truth: np.ndarray) -> dict:
+    """The posterior's z against the least-squares z of the same data sets, per coefficient.
+
+    Parameters
+    ----------
+    z_post : (K, n) array
+        (truth − posterior mean)/posterior sd of each data set.
+    optima, laplace_sd : (K, n) arrays
+        The least-squares optimum of the same data sets and its Laplace (Gauss–Newton) sd.
+    truth : (n,) array
+
+    Returns
+    -------
+    dict
+        ``sd_z_ls`` (n,): sd of z_LS = (truth − optimum)/Laplace sd, the least-squares estimate's scatter in its
+        own Laplace sds (1 when the Laplace width is the noise's); ``slope`` (n,): the least-squares slope of
+        z_post on z_LS, Laplace sd / posterior sd where the posterior mean follows the optimum (> 1: the
+        posterior is narrower than the Laplace approximation at the same data); ``correlation`` (n,).
+    """
+    z_ls = (truth - optima) / laplace_sd
+    zc, pc = z_ls - z_ls.mean(axis=0), z_post - z_post.mean(axis=0)
+    slope = np.sum(zc * pc, axis=0) / np.sum(zc * zc, axis=0)
+    corr = np.sum(zc * pc, axis=0) / np.sqrt(np.sum(zc * zc, axis=0) * np.sum(pc * pc, axis=0))
+    return {"sd_z_ls": z_ls.std(axis=0, ddof=1), "slope": slope, "correlation": corr}
+
+
+def least_squares_tables(paired: list) -> list[str]:
+    """The posterior (default prior) against least squares on the same noise draws of each design: the
+    least-squares scatter in Laplace sds, and how the posterior's z follows the least-squares z."""
+    rows, corr, slopes = [], [], []
+    narrower, corrected = {}, {}
+    for r, f in paired:
+        k = min(r["draws"], f["fits"])
+        fig = paired_figures(np.asarray(r["per_draw"]["reference"]["z"], float)[:k],
+                             np.asarray(f["per_draw"]["theta"], float)[:k],
+                             np.asarray(f["per_draw"]["laplace_sd"], float)[:k],
+                             np.array([f["truth"][c] for c in COEFFICIENTS]))
+        d = str(r["replicate"])
+        corr += list(fig["correlation"])
+        slopes.append(fig["slope"])
+        rows.append([d, str(k), "sd of least-squares z"] + [fmt(v, 3) for v in fig["sd_z_ls"]])
+        rows.append([d, str(k), "slope of posterior z on least-squares z"] + [fmt(v, 3) for v in fig["slope"]])
+        for c, sd_ls, b in zip(COEFFICIENTS, fig["sd_z_ls"], fig["slope"]):
+            post_off = abs(r["reference"]["sd_z"][c] - 1.0) > SD_Z_TOLERANCE
+            ls_off = abs(sd_ls - 1.0) > SD_Z_TOLERANCE
+            if post_off and not ls_off and b > 1.0:
+                narrower.setdefault(c, []).append(d)
+            if ls_off and not post_off:
+                corrected.setdefault(c, []).append(d)
+    wider = [c for c, b in zip(COEFFICIENTS, np.max(slopes, axis=0)) if b < 0.95]
+    L = ["", "The same noise draws fitted by least squares (the starting fit of `sample`), each optimum standardised "
+         "by its own Laplace sd: the scatter of that z says whether the Laplace approximation has the width the "
+         f"noise implies, and the slope of the posterior's z on it (correlations {fmt(min(corr), 2)}–"
+         f"{fmt(max(corr), 2)}) how the posterior departs from that approximation — above 1 the posterior is "
+         "narrower than the Laplace approximation of the same data, below 1 wider" +
+         (f" (on every design: {', '.join(wider)})" if wider else "") + ":", ""]
+    L += table(["design", "draws", "statistic"] + COEFFICIENTS, rows)
+    def listed(found):
+        return "; ".join(f"{c} (design {', '.join(ds)})" for c, ds in found.items())
+    if corrected:
+        L += ["", "Where the least-squares z has sd outside 1 ± 0.15 and the posterior's inside it, the posterior "
+              "corrects the Laplace approximation's width: " + listed(corrected) + "."]
+    if narrower:
+        L += ["", "Where the posterior's sd(z) is outside 1 ± 0.15 while the least-squares z is inside it, the "
+              "intervals are too narrow because the posterior is narrower than the Laplace approximation of the "
+              "same data (slope above 1), while the least-squares optimum scatters within 1 ± 0.15 of its Laplace "
+              "width: " + listed(narrower) + "."]
     return L
