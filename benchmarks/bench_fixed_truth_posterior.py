@@ -17,11 +17,12 @@ an existing one is not replaced); tools/make_validation.py reads such files from
 Every draw is reproducible on its own (synth seed 5000 + k, the replicate's sampler seed), so ``--extend FILE``
 takes the draws of an earlier file of the same replicate and priors and computes only the draws after them: the
 result is the file ``--draws K`` would write (its ``command`` says so). ``--processes N`` runs N draws at a
-time.
+time. ``--sampler KEY=VALUE …`` overrides the campaign's sampler settings (e.g. ``max_steps=3000 min_steps=1000``
+for runs longer than the template's short ones, with the same noise draws); the file records them.
 
     python benchmarks/bench_fixed_truth_posterior.py runs/calibration/four_flights_varied.yaml [--replicate 0]
                                                      [--draws 20] [--priors reference flat] [--out FILE]
-                                                     [--extend FILE] [--processes 1]
+                                                     [--extend FILE] [--processes 1] [--sampler KEY=VALUE …]
 """
 from __future__ import annotations
 
@@ -105,9 +106,10 @@ def figures(rec: dict, names: list, n_draws: int) -> dict:
             "not_converged": int(n - sum(rec["converged"]))}
 
 
-def one_draw(campaign: Path, replicate: int, k: int, priors: list) -> dict:
-    """Noise draw ``k`` of the replicate's fixed design, sampled under each prior of the initial conditions:
-    {prior: (distance², z (n,), u (n,), converged, posterior draws)}."""
+def one_draw(campaign: Path, replicate: int, k: int, priors: list, sampler: dict) -> dict:
+    """Noise draw ``k`` of the replicate's fixed design, sampled under each prior of the initial conditions with
+    the campaign's sampler settings overridden by ``sampler``: {prior: (distance², z (n,), u (n,), converged,
+    posterior draws)}."""
     logging.getLogger("bayes_disc").setLevel(logging.WARNING)
     cal = load_cal_config(campaign)
     truth, flights, sampler_seed = fixed_design(cal, replicate)
@@ -121,6 +123,7 @@ def one_draw(campaign: Path, replicate: int, k: int, priors: list) -> dict:
         tmp = Path(tmp)
         write_synth(result, tmp / "markers.csv", tmp / "truth.json")
         run = replicate_run(cal, result, sampler_seed)
+        run = {**run, "sampler": {**run["sampler"], **sampler}}
         for ic in priors:
             draws, converged = sample_draws(run, ic, tmp, names)
             dd, z = coverage_figures(t, draws)
@@ -139,7 +142,22 @@ def fixed_design(cal, replicate: int) -> tuple[dict, list, int]:
     return truth, flights, sampler_seed
 
 
-def earlier_draws(path: Path, campaign: str, replicate: int, priors: list, names: list) -> dict:
+def sampler_overrides(items: list) -> dict:
+    """{key: number} of ``--sampler KEY=VALUE`` items (integers where the value is one)."""
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        try:
+            number = float(value)
+        except ValueError:
+            number = None
+        if not sep or not key or number is None:
+            raise SystemExit(f"--sampler {item!r}: give KEY=NUMBER, e.g. max_steps=3000")
+        out[key] = int(number) if number.is_integer() else number
+    return out
+
+
+def earlier_draws(path: Path, campaign: str, replicate: int, priors: list, names: list, sampler: dict) -> dict:
     """{prior: ({distance2, z, quantile, converged: lists}, posterior draws per run)} of an earlier file of the
     same replicate and priors."""
     old = json.loads(path.read_text())
@@ -148,6 +166,8 @@ def earlier_draws(path: Path, campaign: str, replicate: int, priors: list, names
                          f"{sorted(old['per_draw'])}: not this replicate and priors")
     if list(old["truth"]) != names:
         raise SystemExit(f"{path} holds other coefficients than the campaign's")
+    if old.get("sampler", {}) != sampler:
+        raise SystemExit(f"{path} was sampled with sampler settings {old.get('sampler', {})}, not {sampler}")
     if any("quantile" not in d for d in old["per_draw"].values()):
         raise SystemExit(f"{path} holds no truth quantiles (an older file): compute every draw afresh")
     return {ic: ({key: list(d[key]) for key in PER_DRAW}, old["posterior_draws"][ic])
@@ -164,7 +184,10 @@ def main(argv=None) -> int:
     ap.add_argument("--extend", type=Path, help="an earlier --out file of this replicate and these priors: its "
                                                 "draws are taken, only the later ones computed")
     ap.add_argument("--processes", type=int, default=1, help="draws computed at a time")
+    ap.add_argument("--sampler", nargs="*", default=[], metavar="KEY=VALUE",
+                    help="override the campaign's sampler settings, e.g. max_steps=3000 min_steps=1000")
     a = ap.parse_args(argv)
+    sampler = sampler_overrides(a.sampler)
     if a.out is not None and a.out.exists():
         raise SystemExit(f"{a.out} exists: give a new file (it is not replaced)")
     logging.getLogger("bayes_disc").setLevel(logging.WARNING)
@@ -174,12 +197,13 @@ def main(argv=None) -> int:
     rec = {ic: {key: [] for key in PER_DRAW} for ic in a.priors}
     n_draws = dict.fromkeys(a.priors, 0)
     if a.extend is not None:
-        for ic, (old, m) in earlier_draws(a.extend, cal.name, a.replicate, a.priors, names).items():
+        for ic, (old, m) in earlier_draws(a.extend, cal.name, a.replicate, a.priors, names, sampler).items():
             rec[ic], n_draws[ic] = {key: v[:a.draws] for key, v in old.items()}, m
     first = len(rec[a.priors[0]]["distance2"])
     with ProcessPoolExecutor(max_workers=a.processes) as pool:
         ks = range(first, a.draws)
-        results = pool.map(one_draw, [a.campaign] * len(ks), [a.replicate] * len(ks), ks, [a.priors] * len(ks))
+        results = pool.map(one_draw, [a.campaign] * len(ks), [a.replicate] * len(ks), ks, [a.priors] * len(ks),
+                           [sampler] * len(ks))
         for k, result in zip(ks, results):
             for ic, (dd, z, u, c, m) in result.items():
                 for key, v in zip(PER_DRAW, (dd, z, u, c)):
@@ -204,6 +228,9 @@ def main(argv=None) -> int:
                                       "refine_tolerance": reference.REFINE_TOLERANCE}
         out["command"] = (f"python benchmarks/bench_fixed_truth_posterior.py {a.campaign.as_posix()} --replicate "
                           f"{a.replicate} --draws {out['draws']} --priors {' '.join(a.priors)}")
+        if sampler:
+            out["sampler"] = sampler
+            out["command"] += " --sampler " + " ".join(f"{k}={v}" for k, v in sampler.items())
         a.out.parent.mkdir(parents=True, exist_ok=True)
         a.out.write_text(json.dumps(out, indent=1))
     return 0

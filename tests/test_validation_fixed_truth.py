@@ -53,3 +53,13 @@ def test_paired_figures_recover_a_posterior_narrower_than_the_laplace_approximat
     assert np.all(np.abs(fig["sd_z_ls"] - 1.0) < 0.1), fig["sd_z_ls"]
     wider = V.paired_figures(z_ls * 0.7 + 0.3 * rng.standard_normal((k, n)), optima, laplace_sd, truth)
     assert np.all(np.abs(wider["slope"] - 0.7) < 0.06) and np.all(wider["correlation"] < 0.95)
+
+
+def test_files_sampled_with_other_sampler_settings_are_labelled_apart():
+    """A file whose runs replaced the campaign's sampler settings (``sampler``) is not counted with the template's
+    runs under the same prior: its label names the settings."""
+    template = {"reference_surrogate": {}}
+    longer = {"reference_surrogate": {}, "sampler": {"max_steps": 3000, "min_steps": 2000}}
+    assert V.prior_label(template, "reference") == "reference (default)"
+    assert V.prior_label(longer, "reference") == "reference (default), sampler max_steps 3000, min_steps 2000"
+    assert V.prior_label({}, "reference") == V.PLAIN_SURROGATE

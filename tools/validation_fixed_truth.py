@@ -36,10 +36,15 @@ def design_text(flights: list[dict]) -> str:
 
 def prior_label(result: dict, prior: str) -> str:
     """How a file's figures under ``prior`` are named: the default reference prior, the reference prior with the
-    plain least-squares surrogate (files without ``reference_surrogate``), or flat."""
+    plain least-squares surrogate (files without ``reference_surrogate``), or flat; with the sampler settings
+    that replaced the campaign's short ones, if any (``sampler``)."""
     if prior == "reference" and "reference_surrogate" not in result:
-        return PLAIN_SURROGATE
-    return PRIOR_WORDS[prior]
+        label = PLAIN_SURROGATE
+    else:
+        label = PRIOR_WORDS[prior]
+    if result.get("sampler"):
+        label += ", sampler " + ", ".join(f"{k} {v}" for k, v in result["sampler"].items())
+    return label
 
 
 def pass_chance(z: np.ndarray) -> float:
@@ -141,8 +146,8 @@ def section_fixed_truth() -> list[str]:
         L += coverage_tables(with_u, coverage_verdicts)
     fits = {(f["campaign"], f["replicate"]): f
             for f in (json.loads(path.read_text()) for path in sorted(LEAST_SQUARES.glob("*.json")))}
-    paired = [(r, fits[r["campaign"], r["replicate"]]) for r, p, label in entries
-              if label == PRIOR_WORDS["reference"] and (r["campaign"], r["replicate"]) in fits]
+    paired = [(r, fits[r["campaign"], r["replicate"]], label) for r, p, label in entries
+              if p == "reference" and label != PLAIN_SURROGATE and (r["campaign"], r["replicate"]) in fits]
     if paired:
         L += least_squares_tables(paired)
     if any(label == PLAIN_SURROGATE for _, _, label in entries):
@@ -224,7 +229,7 @@ def least_squares_tables(paired: list) -> list[str]:
     least-squares scatter in Laplace sds, and how the posterior's z follows the least-squares z."""
     rows, corr, slopes = [], [], []
     narrower, corrected = {}, {}
-    for r, f in paired:
+    for r, f, label in paired:
         k = min(r["draws"], f["fits"])
         fig = paired_figures(np.asarray(r["per_draw"]["reference"]["z"], float)[:k],
                              np.asarray(f["per_draw"]["theta"], float)[:k],
@@ -233,8 +238,9 @@ def least_squares_tables(paired: list) -> list[str]:
         d = str(r["replicate"])
         corr += list(fig["correlation"])
         slopes.append(fig["slope"])
-        rows.append([d, str(k), "sd of least-squares z"] + [fmt(v, 3) for v in fig["sd_z_ls"]])
-        rows.append([d, str(k), "slope of posterior z on least-squares z"] + [fmt(v, 3) for v in fig["slope"]])
+        rows.append([d, label, str(k), "sd of least-squares z"] + [fmt(v, 3) for v in fig["sd_z_ls"]])
+        rows.append([d, label, str(k), "slope of posterior z on least-squares z"] + [fmt(v, 3) for v in fig["slope"]])
+        d = d if label == PRIOR_WORDS["reference"] else f"{d}, {label}"
         for c, sd_ls, b in zip(COEFFICIENTS, fig["sd_z_ls"], fig["slope"]):
             post_off = abs(r["reference"]["sd_z"][c] - 1.0) > SD_Z_TOLERANCE
             ls_off = abs(sd_ls - 1.0) > SD_Z_TOLERANCE
@@ -249,7 +255,8 @@ def least_squares_tables(paired: list) -> list[str]:
          f"{fmt(max(corr), 2)}) how the posterior departs from that approximation — above 1 the posterior is "
          "narrower than the Laplace approximation of the same data, below 1 wider" +
          (f" (on every design: {', '.join(wider)})" if wider else "") + ":", ""]
-    L += table(["design", "draws", "statistic"] + COEFFICIENTS, rows)
+    L += table(["design", "prior", "draws", "statistic"] + COEFFICIENTS, rows)
+
     def listed(found):
         return "; ".join(f"{c} (design {', '.join(ds)})" for c, ds in found.items())
     if corrected:
