@@ -5,6 +5,7 @@ files read here, runs/calibration/fixed_truth/*.json), and the least-squares fit
 from __future__ import annotations
 
 import json
+
 import numpy as np
 
 from validation_common import COEFFICIENTS, ROOT, binomial_band, familywise_mass, fmt, table
@@ -95,12 +96,13 @@ def section_fixed_truth() -> list[str]:
         return L
     found.sort(key=lambda r: (r["replicate"], "reference_surrogate" in r))
     entries = [(r, p, prior_label(r, p)) for r in found for p in PRIOR_WORDS if p in r]
-    rows, verdicts = [], {}
+    rows, verdicts, draws = [], {}, {}
     for r, p, label in entries:
         fig = r[p]
         ok_d2, off = judge(fig)
         worst = max(COEFFICIENTS, key=lambda c: abs(fig["mean_z"][c]))
         verdicts.setdefault(label, []).append(ok_d2 and not off)
+        draws.setdefault(label, set()).add(r["draws"])
         rows.append([str(r["replicate"]), label, str(r["draws"]),
                      f"{fmt(fig['mean_distance2'], 4)} [{fmt(fig['band'][0], 4)}, {fmt(fig['band'][1], 4)}]",
                      "yes" if ok_d2 else "**no**", ", ".join(off) or "none",
@@ -158,7 +160,8 @@ def section_fixed_truth() -> list[str]:
               "builds."]
     L += ["", "Reproduce:", "", "```bash"] + [r["command"] + " --out FILE" for r in found]
     L += [f["command"] + " --out FILE" for f in fits.values()] + ["```", ""]
-    words = [f"{label}: the sd(z) criterion holds on {sum(v)} of {len(v)} designs" for label, v in verdicts.items()]
+    words = [f"{label}: the sd(z) criterion holds on {sum(v)} of {len(v)} designs "
+             f"({'/'.join(str(k) for k in sorted(draws[label]))} draws)" for label, v in verdicts.items()]
     words += [f"{label}: every interval's coverage inside its family-wise band on {sum(v)} of {len(v)} designs"
               for label, v in coverage_verdicts.items()]
     L += ["Verdict: by prior of the initial conditions — " + "; ".join(words) + ". " +
@@ -171,17 +174,20 @@ def coverage_tables(entries: list, verdicts: dict) -> list[str]:
     """The truth's posterior quantile u over the draws of files that record it: coverage of the central 50 % and
     90 % intervals against their binomial bands, and the sd of Φ⁻¹(u); ``verdicts`` gets, per prior label, whether
     every coverage is inside its family-wise band."""
-    k_min = min(r["draws"] for r, _, _ in entries)
-    band = {lv: binomial_band(k_min, int(lv) / 100) for lv in ("50", "90")}
-    fw = {lv: binomial_band(k_min, int(lv) / 100, familywise_mass(2 * len(COEFFICIENTS))) for lv in ("50", "90")}
+    mass = familywise_mass(2 * len(COEFFICIENTS))
+
+    def bands(k):
+        b = {lv: binomial_band(k, int(lv) / 100) for lv in ("50", "90")}
+        f = {lv: binomial_band(k, int(lv) / 100, mass) for lv in ("50", "90")}
+        return (f"{k} draws: {fmt(b['50'][0])}–{fmt(b['50'][1])} and {fmt(b['90'][0])}–{fmt(b['90'][1])}; "
+                f"family-wise over the 20, {fmt(f['50'][0])}–{fmt(f['50'][1])} and "
+                f"{fmt(f['90'][0])}–{fmt(f['90'][1])}")
+    ks = sorted({r["draws"] for r, _, _ in entries}, reverse=True)
     L = ["", "Coverage at the fixed truth. The intervals `sample` reports are the posterior's quantiles, so the direct "
          "check of them is where the truth falls among the posterior draws: its posterior quantile u, uniform on "
          "(0, 1) when the intervals cover as they claim, whatever the posterior's shape (z assumes a Gaussian "
-         "posterior; u does not). Coverage of the central 50 % and 90 % intervals over the "
-         f"{k_min} draws (95 % bands {fmt(band['50'][0])}–{fmt(band['50'][1])} and "
-         f"{fmt(band['90'][0])}–{fmt(band['90'][1])}; family-wise over the 20, "
-         f"{fmt(fw['50'][0])}–{fmt(fw['50'][1])} and {fmt(fw['90'][0])}–{fmt(fw['90'][1])}), and the sd of "
-         "Φ⁻¹(u) (1 when calibrated):", ""]
+         "posterior; u does not). Coverage of the central 50 % and 90 % intervals over the draws (95 % bands with "
+         + "; with ".join(bands(k) for k in ks) + "), and the sd of Φ⁻¹(u) (1 when calibrated):", ""]
     rows = []
     for r, p, label in entries:
         fig = r[p]
@@ -192,7 +198,8 @@ def coverage_tables(entries: list, verdicts: dict) -> list[str]:
                         [fmt(fig[f"coverage_{level}"][c], 2) for c in COEFFICIENTS])
         rows.append([str(r["replicate"]), label, "sd Φ⁻¹(u)"] + [fmt(fig["sd_quantile_z"][c], 3) for c in COEFFICIENTS])
     L += table(["design", "prior", "statistic"] + COEFFICIENTS, rows)
-    outside = [(r["replicate"], coverage_judgement(r[p], r["draws"])) for r, p, _ in entries]
+    outside = [(r["replicate"] if label == PRIOR_WORDS["reference"] else f"{r['replicate']} ({label})",
+                coverage_judgement(r[p], r["draws"])) for r, p, label in entries]
     L += ["", "Outside the family-wise band: " + "; ".join(f"design {d}: {', '.join(o) or 'none'}"
                                                           for d, o in outside) + "."]
     return L
