@@ -172,7 +172,6 @@ def test_the_check_at_draws_weighs_singular_draws_zero_and_leaves_failed_fits_ou
     """Where a flight's information is singular (g = −inf) the exact prior's density is zero: those draws weigh
     nothing; where a conditional fit fails the draw is left out; neither stops the check. Here the singular
     draws are those with c₀ > 1, so the exact prior's posterior is N(0, 1) cut there: its mean moves down."""
-    import bayes_disc.inference.fitting.reference as reference
     reference, problem, ls = _stand_in_reference(monkeypatch, lambda c: 0.0, n=3)
 
     def exact(problem, ls, c):

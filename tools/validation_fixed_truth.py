@@ -48,6 +48,12 @@ def prior_label(result: dict, prior: str) -> str:
     return label
 
 
+def design_name(result: dict, label: str, form: str) -> str:
+    """The design's number, with ``label`` (``form``: design, label) unless it is the default prior's."""
+    d = str(result["replicate"])
+    return d if label == PRIOR_WORDS["reference"] else form.format(d, label)
+
+
 def pass_chance(z: np.ndarray) -> float:
     """The probability that calibrated intervals meet the sd(z) criterion with as many draws as ``z`` (K, 10) has:
     K draws of N(0, C), C the correlation of the file's own z (the coefficients' z move together), simulated
@@ -198,8 +204,7 @@ def coverage_tables(entries: list, verdicts: dict) -> list[str]:
                         [fmt(fig[f"coverage_{level}"][c], 2) for c in COEFFICIENTS])
         rows.append([str(r["replicate"]), label, "sd Φ⁻¹(u)"] + [fmt(fig["sd_quantile_z"][c], 3) for c in COEFFICIENTS])
     L += table(["design", "prior", "statistic"] + COEFFICIENTS, rows)
-    outside = [(r["replicate"] if label == PRIOR_WORDS["reference"] else f"{r['replicate']} ({label})",
-                coverage_judgement(r[p], r["draws"])) for r, p, label in entries]
+    outside = [(design_name(r, label, "{} ({})"), coverage_judgement(r[p], r["draws"])) for r, p, label in entries]
     L += ["", "Outside the family-wise band: " + "; ".join(f"design {d}: {', '.join(o) or 'none'}"
                                                           for d, o in outside) + "."]
     return L
@@ -247,7 +252,7 @@ def least_squares_tables(paired: list) -> list[str]:
         slopes.append(fig["slope"])
         rows.append([d, label, str(k), "sd of least-squares z"] + [fmt(v, 3) for v in fig["sd_z_ls"]])
         rows.append([d, label, str(k), "slope of posterior z on least-squares z"] + [fmt(v, 3) for v in fig["slope"]])
-        d = d if label == PRIOR_WORDS["reference"] else f"{d}, {label}"
+        d = design_name(r, label, "{}, {}")
         for c, sd_ls, b in zip(COEFFICIENTS, fig["sd_z_ls"], fig["slope"]):
             post_off = abs(r["reference"]["sd_z"][c] - 1.0) > SD_Z_TOLERANCE
             ls_off = abs(sd_ls - 1.0) > SD_Z_TOLERANCE
