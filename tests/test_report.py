@@ -242,6 +242,19 @@ def test_first_screen_leads_with_the_answer(tiny):
             assert abs(float(text_value) - true) <= 0.5 * last + 1e-15, (name, text_value, true)
         assert q["q05"] < q["q95"]
     assert "Potts &amp; Crowther 2000" in table and "truth" in table
+    # beside the credible interval, the profile interval of summary.json, and which of the two to quote
+    from bayes_disc.inference.fitting.profile_interval import profile_interval
+    paths = json.loads((tiny["run"] / "profiles.json").read_text())
+    for name in summary["coefficients"]:
+        pi = summary["profile_intervals"][name]
+        assert pi == profile_interval(paths[name])
+        assert pi["q05"] < pi["q25"] < pi["q50"] < pi["q75"] < pi["q95"]
+        m = re.search(rf"<td>{name}</td><td>[^<]+</td><td>[^<]+</td><td>([^<]+) … ([^<]+)</td>", table)
+        assert m, name
+        for text_value, true in zip(m.groups(), (pi["q05"], pi["q95"])):
+            last = 10.0 ** -len(text_value.split(".")[1]) if "." in text_value and "e" not in text_value else abs(true) * 1e-3
+            assert abs(float(text_value) - true) <= 0.5 * last + 1e-15, (name, text_value, true)
+    assert "profile 90 % interval" in table and "Which interval to quote" in first
     # run and software tables are no longer on the first screen
     assert "sampler setting" not in first and "Software" not in first
 

@@ -26,6 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from validation_common import (COEFFICIENTS, ROOT, binomial_band, familywise_mass, fmt,  # noqa: E402
                                inside, load, outside_probability, table)
 from validation_fixed_truth import section_fixed_truth  # noqa: E402
+from validation_profile import section_profile_intervals  # noqa: E402
 
 OUT = ROOT / "docs" / "validation.md"
 LEVELS = ("50", "90")
@@ -628,11 +629,13 @@ def build() -> str:
             "- [Recovery of known coefficients](#recovery-of-known-coefficients)",
             "- [Calibration: interval coverage over many data sets](#calibration-interval-coverage-over-many-data-sets)",
             "- [Coverage at fixed truths](#coverage-at-fixed-truths)",
+            "- [Profile intervals](#profile-intervals)",
             "- [Identifiability](#identifiability)",
             "- [Missing physics: blind tests](#missing-physics-blind-tests)",
             "- [Real throws](#real-throws-runsflatball)",
             "- [Speed](#speed)", ""]
-    body = (section_recovery() + section_calibration() + section_fixed_truth() + section_identifiability()
+    body = (section_recovery() + section_calibration() + section_fixed_truth() + section_profile_intervals()
+            + section_identifiability()
             + section_missing_physics() + section_real() + section_speed())
     text = "\n".join(head + body).rstrip() + "\n"
     return text

@@ -32,6 +32,7 @@ from ..inference.model.describe import data_words, flight_info, noise_info, nois
 from ..inference.model.inertial import load_run_throws
 from ..inference.fitting.leastsq import START_FLIGHTS, fit_least_squares, noise_text
 from ..inference.fitting.profile import MAX_LOWER_REFITS, lowest_point, profiles_through_lowest
+from ..inference.fitting.profile_interval import profile_interval
 from ..inference.sampling.proposals import PROFILE_DEPARTURE, independence_proposal, path_departure
 from ..inference.results.draws import prior_record
 from ..inference.results.idata import build_inference_data
@@ -431,6 +432,8 @@ def _write_outputs(cfg: RunConfig, problem, chains, ls_dict: dict, throws, steps
                 "initial_condition_prior": ic}
         if (out / NOISE_CHOICE).is_file():
             info["noise_choice"] = json.loads((out / NOISE_CHOICE).read_text())
+        if (out / "profiles.json").is_file():
+            info["profile_intervals"] = profile_intervals(json.loads((out / "profiles.json").read_text()))
         if (out / FLAGGED).is_file() and robust_flights(problem):
             flags = json.loads((out / FLAGGED).read_text())
             info["flagged"] = {"file": FLAGGED, "outliers": sum(len(f["outliers"]) for f in flags.values()),
@@ -450,6 +453,23 @@ def _write_outputs(cfg: RunConfig, problem, chains, ls_dict: dict, throws, steps
                     "history": chains.history, "sessions": sessions + [session], "versions": software_versions()}
         previous.write_text(json.dumps(run_info, indent=1))
     return summary, run_info
+
+
+def profile_intervals(profiles: dict) -> dict:
+    """summary.json's ``profile_intervals``: each profiled parameter's profile interval
+    (:func:`bayes_disc.inference.fitting.profile_interval.profile_interval`).
+
+    Parameters
+    ----------
+    profiles : dict
+        The content of ``profiles.json`` ({name: {value, t, deviance, …}}).
+
+    Returns
+    -------
+    dict
+        {name: {q05, q25, q50, q75, q95}} in the parameter's unit.
+    """
+    return {name: profile_interval(path) for name, path in profiles.items()}
 
 
 def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> dict:

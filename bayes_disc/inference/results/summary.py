@@ -116,10 +116,13 @@ def build_summary(problem: Problem, chains: Chains, idata, ls_dict: dict, cfg_in
 
 
 def format_table(summary: dict) -> str:
-    """Median, 90 % interval, R-hat and ESS beside the literature values."""
+    """Median, 90 % credible interval, the profile 90 % interval (runs that record it), R-hat and ESS beside the
+    literature values."""
     lit = summary["literature"]
-    rows = [f"{'parameter':<16}{'median':>11}{'q05':>11}{'q95':>11}{'R-hat':>8}{'ESS':>8}"
-            f"{'P&C 2000':>10}{'H&H 2002':>10}"]
+    profile = summary.get("profile_intervals") or {}
+    rows = [f"{'parameter':<16}{'median':>11}{'q05':>11}{'q95':>11}"
+            + (f"{'profile q05':>13}{'profile q95':>13}" if profile else "")
+            + f"{'R-hat':>8}{'ESS':>8}{'P&C 2000':>10}{'H&H 2002':>10}"]
     names = summary["coefficients"] + [n for n in summary["parameters"] if n.startswith("sigma_")]
     for n in names:
         p = summary["parameters"][n]
@@ -129,7 +132,9 @@ def format_table(summary: dict) -> str:
         scale = 1e3 if n.startswith("sigma_") and not inertial else 1.0
         label = n + (" [mm]" if scale != 1 else " [rad/s]" if n.startswith("sigma_gyro_") else
                      " [m/s²]" if inertial else "")
+        pi = profile.get(n)
         rows.append(f"{label:<16}{p['q50'] * scale:>11.4g}{p['q05'] * scale:>11.4g}{p['q95'] * scale:>11.4g}"
-                    f"{p['r_hat']:>8.3f}{p['ess_bulk']:>8.0f}"
+                    + ((f"{pi['q05']:>13.4g}{pi['q95']:>13.4g}" if pi else " " * 26) if profile else "")
+                    + f"{p['r_hat']:>8.3f}{p['ess_bulk']:>8.0f}"
                     f"{'' if pc is None else format(pc, '.4g'):>10}{'' if hh is None else format(hh, '.4g'):>10}")
     return "\n".join(rows)
