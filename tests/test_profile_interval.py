@@ -67,3 +67,12 @@ def test_the_result_table_of_the_log_shows_the_profile_interval_beside_the_credi
     assert "profile q05" in lines[0] and "profile q95" in lines[0]
     assert lines[1].split()[:6] == ["CL0", "0.19", "0.185", "0.195", "0.1812", "0.1987"]
     assert lines[2].split()[:4] == ["CY", "0.19", "0.185", "0.195"] and len(lines[2]) == len(lines[1])
+
+
+def test_the_run_summary_names_a_path_that_gives_no_interval(caplog):
+    from bayes_disc.jobs.sample import profile_intervals
+    t = [-1.0, 0.0, 1.0]
+    paths = {"CL0": _path(t, [1.0, 0.0, 1.0]), "CMq": _path([0.0], [0.0])}
+    with caplog.at_level("WARNING", logger="bayes_disc"):
+        out = profile_intervals(paths)
+    assert list(out) == ["CL0"] and "no profile interval for CMq" in caplog.text

@@ -467,9 +467,16 @@ def profile_intervals(profiles: dict) -> dict:
     Returns
     -------
     dict
-        {name: {q05, q25, q50, q75, q95}} in the parameter's unit.
+        {name: {q05, q25, q50, q75, q95}} in the parameter's unit; a path without the optimum and another point
+        gives none (a warning names it).
     """
-    return {name: profile_interval(path) for name, path in profiles.items()}
+    out = {}
+    for name, path in profiles.items():
+        try:
+            out[name] = profile_interval(path)
+        except ValueError as e:
+            logger.warning(f"no profile interval for {name}: {e}")
+    return out
 
 
 def run_sample(cfg: RunConfig, resume: bool = False, progress: bool = True) -> dict:

@@ -2,8 +2,8 @@
 
 Along the path of θ_i (:mod:`.profile`) the other parameters — the other coefficients and every flight's
 initial conditions — are re-optimised at each value v, and the profile deviance D(v) of the least-squares
-objective (the coefficients' prior included) is recorded. The profile
-interval treats the normalised profile as the coefficient's distribution:
+objective (the coefficients' prior included) is recorded. The profile interval treats the normalised profile as
+the coefficient's distribution:
 
     p(v) ∝ exp(−D(v)/2),                                          D(v) = r(v)²
     r(v) = sgn(v − v̂) √D(v)            (signed root, linear in v between the path's points)
@@ -17,8 +17,8 @@ Unlike the posterior's marginal, the profile maximises over the nuisance paramet
 over them: no volume term enters it, so neither the initial conditions' conditional volume (which shifts the
 marginal along the pitching-moment valley, once per flight) nor the curvature Gauss–Newton leaves out (which
 narrows the marginal of the roll coefficients where the posterior's mass lies off the optimum) does. At fixed
-truths of three varied four-flight designs (docs/validation.md) its intervals' z scatter by 0.90–1.16 against the
-credible intervals' 0.91–1.29.
+truths of varied four-flight designs (docs/validation.md) its intervals' z scatter by 0.89–1.16, the credible
+intervals' of the same data by 0.91–1.29.
 """
 from __future__ import annotations
 
