@@ -252,7 +252,8 @@ def test_first_screen_leads_with_the_answer(tiny):
         m = re.search(rf"<td>{name}</td><td>[^<]+</td><td>[^<]+</td><td>([^<]+) … ([^<]+)</td>", table)
         assert m, name
         for text_value, true in zip(m.groups(), (pi["q05"], pi["q95"])):
-            last = 10.0 ** -len(text_value.split(".")[1]) if "." in text_value and "e" not in text_value else abs(true) * 1e-3
+            last = (10.0 ** -len(text_value.split(".")[1]) if "." in text_value and "e" not in text_value
+                    else abs(true) * 1e-3)
             assert abs(float(text_value) - true) <= 0.5 * last + 1e-15, (name, text_value, true)
     assert "profile 90 % interval" in table and "Which interval to quote" in first
     # run and software tables are no longer on the first screen

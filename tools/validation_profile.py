@@ -57,10 +57,10 @@ def section_profile_intervals() -> list[str]:
     L = ["## Profile intervals", "",
          "**Claim.** The profile 90 % interval `sample` reports beside the credible one (`profile_intervals` in "
          "summary.json: quantiles of the coefficient's normalised profile likelihood, every other parameter "
-         "re-optimised; [how it works](how-it-works.md#profile-intervals)) covers at its nominal rate at fixed truths of "
-         "the varied four-flight designs — z = Φ⁻¹(u), u the truth's quantile under the profile, has sd 1 ± 0.15 "
-         "for every coefficient and the central 50 % and 90 % intervals contain the truth at those rates — and "
-         "over the varied campaign's replicates, each with its own truth.", ""]
+         "re-optimised; [how it works](how-it-works.md#profile-intervals)) covers at its nominal rate at fixed "
+         "truths of the varied four-flight designs — z = Φ⁻¹(u), u the truth's quantile under the profile, has sd "
+         "1 ± 0.15 for every coefficient and the central 50 % and 90 % intervals contain the truth at those "
+         "rates — and over the varied campaign's replicates, each with its own truth.", ""]
     if not found:
         L += ["No result files of this measurement are committed, so this page states no numbers for it.", "",
               "Measured by `python benchmarks/bench_profile_coverage.py runs/calibration/four_flights_varied.yaml "
