@@ -572,10 +572,11 @@ def test_sample_with_robust_and_ar1_noise_writes_the_flags(tmp_path, monkeypatch
 
 @pytest.mark.slow
 def test_four_flights_with_outliers_and_swaps_sampled_inside_the_clean_intervals(tmp_path, monkeypatch):
-    """Four flights with 2–6 cm outliers on 1 % of the points and labels swapped in a few frames,
-    sampled with ``noise.model: robust``: every injected defect is listed, and every coefficient's median
-    lies inside the 90 % interval of the same data without the defects (sampled with the plain model), both
-    given the judgement and averaged over it."""
+    """Four flights with 2–6 cm outliers on 1 % of the points and labels swapped in a few frames, sampled with
+    the default configuration (``noise: auto``): every flight gets the robust model and the log and summary.json
+    say so, every injected defect is listed, and every coefficient's median lies inside the 90 % interval of
+    the same data without the defects (sampled with the default configuration too), both given the judgement and
+    averaged over it."""
     import json
     from bayes_disc.cli import main
     from bayes_disc.observation.markers import write_marker_csv
@@ -602,12 +603,16 @@ def test_four_flights_with_outliers_and_swaps_sampled_inside_the_clean_intervals
         table.xyz[frame] = table.xyz[frame[::-1]]
         swaps.append((name, float(t)))
     write_marker_csv(tmp_path / "defects" / "flights.csv", table)
-    for d, model in (("clean", "gaussian"), ("defects", "robust")):
-        (tmp_path / d / "config.yaml").write_text(run_config(d, (
-            f"output: out\nnoise: {{model: {model}}}\nsampler: {{seed: 3, max_steps: 1500}}")))
+    for d in ("clean", "defects"):
+        (tmp_path / d / "config.yaml").write_text(run_config(d, "output: out\nsampler: {seed: 3, max_steps: 1500}"))
         assert main(["sample", str(tmp_path / d / "config.yaml"), "--no-progress"]) == 0
     clean_s = json.loads((tmp_path / "clean" / "out" / "summary.json").read_text())
     robust_s = json.loads((tmp_path / "defects" / "out" / "summary.json").read_text())
+    assert all(r["label"] == "white" for r in clean_s["noise_choice"].values()), clean_s["noise_choice"]
+    for name, r in robust_s["noise_choice"].items():
+        assert r["label"] == "robust" and r["by"] == "gross errors", (name, r)
+        assert robust_s["noise"][name]["model"] == "robust"
+        assert r["text"].startswith(f"{name}: robust noise chosen")
     flags = json.loads((tmp_path / "defects" / "out" / "flagged.json").read_text())
     listed = {(o["flight"], round(o["t"], 6), o["marker"]) for f in flags.values() for o in f["outliers"]}
     injected = {(str(table.flight[r]), round(float(table.t[r]), 6), str(table.marker[r])) for r in outliers}

@@ -256,6 +256,17 @@ def test_first_screen_leads_with_the_answer(tiny):
                     else abs(true) * 1e-3)
             assert abs(float(text_value) - true) <= 0.5 * last + 1e-15, (name, text_value, true)
     assert "profile 90 % interval" in table and "Which interval to quote" in first
+    # each published set tested as a whole: its values, W on as many degrees of freedom, inside or outside
+    from scipy.stats import chi2
+    from bayes_disc.physics.constants import LITERATURE
+    tests = summary["literature_tests"]
+    assert set(tests) == set(LITERATURE)
+    for key, t in tests.items():
+        assert t["values"] == LITERATURE[key].values and t["dof"] == len(LITERATURE[key].values)
+        assert t["inside_90"] == (t["deviance"] <= chi2.ppf(0.9, t["dof"]))
+        where = "inside" if t["inside_90"] else "outside"
+        assert f"its {t['dof']} values together: W = {t['deviance']:.4g}" in first
+        assert f"{t['deviance']:.4g}, {where} the data's joint 90 % region" in first
     # run and software tables are no longer on the first screen
     assert "sampler setting" not in first and "Software" not in first
 

@@ -30,6 +30,7 @@ from ..inference.model.config import RunConfig
 from ..inference.model.data import build_problem
 from ..inference.model.describe import data_words, flight_info, noise_info, noise_words
 from ..inference.model.inertial import load_run_throws
+from ..inference.fitting.joint_region import literature_tests
 from ..inference.fitting.leastsq import START_FLIGHTS, fit_least_squares, noise_text
 from ..inference.fitting.profile import MAX_LOWER_REFITS, lowest_point, profiles_through_lowest
 from ..inference.fitting.profile_interval import profile_interval
@@ -55,6 +56,8 @@ logger = logging.getLogger(__name__)
 RUN_KEY = "run_key.json"
 #: sampler settings that may change on resume (the stopping rule, the cap, parallelism)
 RESUMABLE_SETTINGS = ("max_steps", "check_every", "min_steps", "n_tau", "rhat", "ess", "processes")
+#: the published coefficient sets' joint tests (:func:`_literature_tests`)
+LITERATURE_TESTS = "literature_tests.json"
 #: least-squares files a resume reuses
 LEAST_SQUARES_FILES = ("least_squares.json", "least_squares_theta.npy", "least_squares_cov.npy")
 
@@ -417,10 +420,37 @@ def _prepare_sampling(cfg: RunConfig, problem, out: Path, resume: bool, progress
         return chosen["problem"]
     proposal, ls = posterior_approximation(problem, ls, cfg.sampler.processes, out, progress=progress,
                                            max_nfev=cfg.least_squares.max_nfev, with_prior=with_prior)
+    _literature_tests(problem, ls, out)
     problem, ic = chosen["problem"], chosen["ic"]
     (out / "chains").mkdir(exist_ok=True)
     (out / "chains" / RUN_KEY).write_text(json.dumps(run_key(cfg, problem), indent=1))
     return Prepared(raw, problem, ls.to_dict(), proposal, None, ic, chosen["ls"])
+
+
+def _literature_tests(problem, ls, out: Path) -> None:
+    """Each published coefficient set against the data's joint profile region
+    (:func:`bayes_disc.inference.fitting.joint_region.literature_tests`): logged and written to
+    ``<out>/literature_tests.json`` (summary.json ``literature_tests``). A set whose fit fails is named in a
+    warning and left out."""
+    with stage("joint tests", "the published coefficient sets against the joint profile region"):
+        try:
+            tests = literature_tests(problem, ls)
+        except RuntimeError as e:
+            logger.warning(f"no joint test of the published coefficient sets: {e}")
+            (out / LITERATURE_TESTS).unlink(missing_ok=True)
+            return
+        for key, t in tests.items():
+            if t.below_optimum:
+                logger.warning(f"holding the {key} values reached a lower cost than the least-squares optimum (W = "
+                               f"{t.deviance:.4g}): the optimum is not the lowest point, and these values fit the "
+                               "data better than it; the intervals are those of the optimum found")
+                continue
+            where = "inside" if t.inside else "outside"
+            p = "p < 0.001" if t.p_value < 1e-3 else f"p = {t.p_value:.2g}"
+            logger.info(f"{key} ({t.dof} coefficients): profile deviance W = {t.deviance:.4g}, {where} the "
+                        f"joint 90 % region ({p})"
+                        + ("" if t.converged else "; its fit stopped at its budget, so W is an upper bound"))
+        (out / LITERATURE_TESTS).write_text(json.dumps({k: t.to_dict() for k, t in tests.items()}, indent=1))
 
 
 def _write_outputs(cfg: RunConfig, problem, chains, ls_dict: dict, throws, steps, out: Path, t0: float, ic: dict):
@@ -432,6 +462,8 @@ def _write_outputs(cfg: RunConfig, problem, chains, ls_dict: dict, throws, steps
                 "initial_condition_prior": ic}
         if (out / NOISE_CHOICE).is_file():
             info["noise_choice"] = json.loads((out / NOISE_CHOICE).read_text())
+        if (out / LITERATURE_TESTS).is_file():
+            info["literature_tests"] = json.loads((out / LITERATURE_TESTS).read_text())
         if (out / "profiles.json").is_file():
             info["profile_intervals"] = profile_intervals(json.loads((out / "profiles.json").read_text()))
         if (out / FLAGGED).is_file() and robust_flights(problem):

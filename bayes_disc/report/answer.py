@@ -349,6 +349,30 @@ def profile_note(summary: dict) -> str:
             "predictions, functions of several coefficients). Both assume the model is adequate.</p>")
 
 
+def literature_test_note(summary: dict) -> str:
+    """Each published set tested as a whole against the data's joint profile region (``literature_tests`` in
+    summary.json; "" for a run without them)."""
+    tests = summary.get("literature_tests") or {}
+    if not tests:
+        return ""
+    items = []
+    for key, t in tests.items():
+        if t.get("below_optimum"):
+            items.append(f"<b>{esc(LIT_LABELS.get(key, key))}</b>, its {t['dof']} values together: a lower cost "
+                         f"than the least-squares optimum (W = {fmt(t['deviance'])}), so the optimum this run "
+                         "reports is not the lowest point and these values fit the data better")
+            continue
+        where = "inside" if t["inside_90"] else "outside"
+        p = "p &lt; 0.001" if t["p_value"] < 1e-3 else f"p = {t['p_value']:.2g}"
+        bound = "" if t["converged"] else " (an upper bound: its fit stopped at its budget)"
+        items.append(f"<b>{esc(LIT_LABELS.get(key, key))}</b>, its {t['dof']} values together: "
+                     f"W = {fmt(t['deviance'])}{bound}, {where} the data's joint 90 % region ({p})")
+    return ("<p class=note><b>Published sets as a whole.</b> " + "; ".join(items) + ". W is the profile "
+            "deviance of the set's values held together, every other parameter re-optimised: χ² with as many "
+            "degrees of freedom as values when the set is this disc's truth "
+            "(<code>literature_tests</code> in summary.json).</p>")
+
+
 def qualified_by_adequacy(ident: Verdict, diagnosis: dict | None) -> Verdict:
     """The identifiability line, qualified when ``diagnose`` left structure no term explains: the verdicts
     then describe the curvature of a model the data reject, so "identified" is not a finding.
@@ -386,6 +410,6 @@ def answer_section(ctx) -> Section:
                 "<i>out</i> is a finding, not an error. Rate coefficients (CMq, CRr, CRp, CNr) are per rad/s; "
                 "Potts &amp; Crowther give none. Details, 95 % intervals, R-hat and ESS per coefficient: "
                 '<a href="#coefficients">Coefficients</a>.</p>')
-    html = (estimated_text(ctx) + verdicts + answer_table(ctx) + lit_note + profile_note(ctx.summary)
-            + noise_choice_html(ctx.summary))
+    html = (estimated_text(ctx) + verdicts + answer_table(ctx) + lit_note + literature_test_note(ctx.summary)
+            + profile_note(ctx.summary) + noise_choice_html(ctx.summary))
     return Section("answer", "Result", "", html)   # no reading guide: the first screen explains itself

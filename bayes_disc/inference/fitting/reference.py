@@ -40,7 +40,7 @@ from ..model.priors import ReferenceSurrogate, fit_reference_surrogate, referenc
 from ..model.problem import Problem
 from .covariance import scaled_cholesky
 from .leastsq import LeastSquaresResult
-from .minimiser import MU_NEAR, minimise
+from .minimiser import MU_NEAR, Minimum, minimise
 from .profile import DEVIANCE_TOL
 from .residuals import jacobian_blocks, whitened_costs
 from .robust import weighted_quantiles
@@ -116,43 +116,50 @@ def ic_log_determinants(problem: Problem, theta: np.ndarray, sigma: np.ndarray) 
     return out
 
 
-def conditional_optimum(problem: Problem, ls: LeastSquaresResult, c: np.ndarray) -> np.ndarray:
-    """θ with the coefficients at ``c`` and every other parameter at its optimum given them.
+def conditional_optimum(problem: Problem, ls: LeastSquaresResult, c: np.ndarray, held: np.ndarray | None = None,
+                        max_nfev: int = CONDITIONAL_NFEV) -> Minimum:
+    """The optimum of every parameter but the coefficients ``held``, which stay at ``c``.
 
     Parameters
     ----------
     problem : Problem
     ls : LeastSquaresResult
         The least-squares optimum, its noise scales (held) and covariance (for the start).
-    c : (n_coef,) array
-        The coefficients.
+    c : (len(held),) array
+        The held coefficients' values.
+    held : (k,) int array, optional
+        Their indices (default: all ``problem.n_coef`` coefficients).
+    max_nfev : int
+        Evaluation budget (:data:`CONDITIONAL_NFEV`: next to the optimum, 2–4 Jacobians).
 
     Returns
     -------
-    (dim,) array
+    Minimum
+        ``x`` (dim,) the held coefficients at ``c`` and every other parameter at its optimum given them; its
+        ``status`` is 0 where the budget stopped the fit (used where it stopped: next to the optimum when the
+        start is, and :func:`build_ic_reference`'s held-out check measures the result).
 
     Raises
     ------
     RuntimeError
-        The fit failed (no step lowered the cost, or no positive-definite damped system); a fit stopped by its
-        budget (:data:`CONDITIONAL_NFEV`) is used where it stopped, next to the optimum (the held-out check of
-        :func:`build_ic_reference` measures the result).
+        The fit failed (no step lowered the cost, or no positive-definite damped system).
     """
-    n = problem.n_coef
-    S = ls.cov[:n, :n]
-    start = ls.theta + ls.cov[:, :n] @ np.linalg.solve(S, c - ls.theta[:n])
-    start[:n] = c
-    held = ls.theta.copy()
-    held[:n] = c
-    x0 = min((start, held), key=lambda x: float(whitened_costs(x, problem, ls.sigma)[0]))
+    held = np.arange(problem.n_coef) if held is None else np.asarray(held, int)
+    c = np.asarray(c, float)
+    S = ls.cov[np.ix_(held, held)]
+    start = ls.theta + ls.cov[:, held] @ np.linalg.solve(S, c - ls.theta[held])    # the Laplace conditional mean
+    start[held] = c
+    kept = ls.theta.copy()
+    kept[held] = c
+    x0 = min((start, kept), key=lambda x: float(whitened_costs(x, problem, ls.sigma)[0]))
     free = np.ones(problem.dim, bool)
-    free[:n] = False
+    free[held] = False
     cost0 = max(float(ls.cost), 1e-300)
-    res = minimise(problem, x0, ls.sigma, free=free, max_nfev=CONDITIONAL_NFEV, mu0=MU_NEAR,
+    res = minimise(problem, x0, ls.sigma, free=free, max_nfev=max_nfev, mu0=MU_NEAR,
                    ftol=0.5 * DEVIANCE_TOL / cost0, dtol=0.25 * DEVIANCE_TOL)
     if res.status < 0:
-        raise RuntimeError(f"the conditional fit at c = {np.round(c, 5).tolist()} failed: {res.message}")
-    return res.x
+        raise RuntimeError(f"the conditional fit at {np.round(c, 5).tolist()} failed: {res.message}")
+    return res
 
 
 def exact_log_reference(problem: Problem, ls: LeastSquaresResult, c: np.ndarray) -> tuple[float, float]:
@@ -166,7 +173,7 @@ def exact_log_reference(problem: Problem, ls: LeastSquaresResult, c: np.ndarray)
         −inf where a flight's block is singular.
     deviance : float
     """
-    x = conditional_optimum(problem, ls, c)
+    x = conditional_optimum(problem, ls, c).x
     deviance = 2.0 * (float(whitened_costs(x, problem, ls.sigma)[0]) - float(ls.cost))
     return float(np.sum(ic_log_determinants(problem, x, ls.sigma))), deviance
 
