@@ -105,6 +105,19 @@ def reference_dir() -> Path:
     return locate_reference()
 
 
+@pytest.fixture(scope="module")
+def two_flights(tmp_path_factory):
+    """Two 1-s synthetic flights with white marker noise: (Problem, its least-squares result)."""
+    from bayes_disc.inference.fitting.leastsq import fit_least_squares
+    from bayes_disc.inference.model.config import load_config
+    from bayes_disc.inference.model.data import build_problem
+    d = tmp_path_factory.mktemp("two")
+    write_two_flights(d, 1.0)
+    (d / "config.yaml").write_text(run_config("two", "output: out", "noise: {model: gaussian}"))
+    problem = build_problem(load_config(d / "config.yaml"))
+    return problem, fit_least_squares(problem, starts=1, max_nfev=200, seed=1)
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)

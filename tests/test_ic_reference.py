@@ -11,7 +11,7 @@ from bayes_disc.inference.model.priors import (ReferenceSurrogate, fit_reference
                                                surrogate_from_dict)
 from bayes_disc.observation.config_io import ConfigError
 
-from conftest import run_config, write_short_flight, write_two_flights
+from conftest import run_config, write_short_flight
 
 
 def test_the_surrogate_recovers_a_quadratic_exactly():
@@ -252,18 +252,6 @@ def test_the_reference_prior_moves_the_marginal_back_to_the_profile():
 
 
 # ------------------------------------------------------------------------------------------ the project's problem
-@pytest.fixture(scope="module")
-def two_flights(tmp_path_factory):
-    from bayes_disc.inference.fitting.leastsq import fit_least_squares
-    from bayes_disc.inference.model.config import load_config
-    from bayes_disc.inference.model.data import build_problem
-    d = tmp_path_factory.mktemp("two")
-    write_two_flights(d, 1.0)
-    (d / "config.yaml").write_text(run_config("two", "output: out", "noise: {model: gaussian}"))
-    problem = build_problem(load_config(d / "config.yaml"))
-    return problem, fit_least_squares(problem, starts=1, max_nfev=200, seed=1)
-
-
 def test_the_surrogate_matches_the_exact_log_determinants_at_held_out_points(two_flights):
     """The built surrogate against ½ Σ_f ln det I_xx,f at the conditional optimum of fresh coefficient points
     drawn where the posterior lies (N(ĉ, 1.3² Σ), another seed than the build's; those within the deviance the

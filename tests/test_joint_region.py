@@ -7,20 +7,6 @@ from scipy import stats
 
 from bayes_disc.inference.fitting.joint_region import JointTest, literature_tests, profile_deviance
 
-from conftest import run_config, write_two_flights
-
-
-@pytest.fixture(scope="module")
-def two_flights(tmp_path_factory):
-    from bayes_disc.inference.fitting.leastsq import fit_least_squares
-    from bayes_disc.inference.model.config import load_config
-    from bayes_disc.inference.model.data import build_problem
-    d = tmp_path_factory.mktemp("two")
-    write_two_flights(d, 1.0)
-    (d / "config.yaml").write_text(run_config("two", "output: out", "noise: {model: gaussian}"))
-    problem = build_problem(load_config(d / "config.yaml"))
-    return problem, fit_least_squares(problem, starts=1, max_nfev=200, seed=1)
-
 
 def test_the_deviance_is_zero_at_the_optimum_and_the_quadratic_form_near_it(two_flights):
     """At the optimum's own values W = 0; one coefficient held m least-squares sds away gives W ≈ m² where the
