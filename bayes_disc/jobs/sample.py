@@ -430,8 +430,9 @@ def _prepare_sampling(cfg: RunConfig, problem, out: Path, resume: bool, progress
 def _literature_tests(problem, ls, out: Path) -> None:
     """Each published coefficient set against the data's joint profile region
     (:func:`bayes_disc.inference.fitting.joint_region.literature_tests`): logged and written to
-    ``<out>/literature_tests.json`` (summary.json ``literature_tests``). A set whose fit fails is named in a
-    warning and left out."""
+    ``<out>/literature_tests.json`` (summary.json ``literature_tests``). When a set's fit fails, the warning
+    names it and no set's test is written; a set whose fit went below the optimum gets a warning instead of a
+    verdict line."""
     with stage("joint tests", "the published coefficient sets against the joint profile region"):
         try:
             tests = literature_tests(problem, ls)
