@@ -75,6 +75,7 @@ def ar1_run(tmp_path_factory):
     return path, summary, log
 
 
+@pytest.mark.xdist_group("ar1_run")     # one worker samples the shared run
 def test_ar1_noise_is_chosen_for_every_flight_and_stated(ar1_run):
     """AR(1) data, default configuration: every flight gets AR(1) noise by evidence (ΔBIC over white above
     the threshold, ρ̂ near 0.85), sampled with ρ_f; summary.json's ``noise_choice``, noise_choice.json, one log
@@ -99,6 +100,7 @@ def test_ar1_noise_is_chosen_for_every_flight_and_stated(ar1_run):
     assert "over white noise" in html
 
 
+@pytest.mark.xdist_group("ar1_run")     # one worker samples the shared run
 def test_a_resumed_or_reported_run_rebuilds_the_chosen_models(ar1_run):
     """The configuration alone builds white noise; with the run's saved choice the problem is the one sampled
     (its chains' run key matches, as resuming and the report need)."""

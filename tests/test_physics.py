@@ -97,7 +97,7 @@ def test_mirrored_throw_gives_mirrored_path():
 TERM_VALUES = {"side_force": [0.3, 0.8], "wind": [1.5, -2.0, 0.3, 0.5, -0.4], "ground_effect": [0.4, 0.2, 0.3],
                "nonlinear_aero": [-1.5, 1.0, 0.3, 1.0, -2.0, 0.5], "spin_lift": [0.3, 1.2],
                "roll_spin_coupling": [0.02, 0.9], "inertia_ratio": [-0.05], "rate_coupling": [-0.006, 0.004],
-               "rate_damping": [-0.03, -0.002]}
+               "rate_damping": [-0.03, -0.002], "disc_asymmetry": [0.01, -0.008]}
 
 
 @pytest.mark.parametrize("terms", [(), ("side_force", "wind"), ("ground_effect",), ("nonlinear_aero",),
@@ -128,6 +128,51 @@ def test_every_term_is_off_at_its_off_value_and_changes_the_flight_otherwise(nam
     sign = {"spin_lift": 1, "nonlinear_aero": -1}.get(name)
     if sign is not None:
         assert sign * (on.markers[0, -1, :, 2].mean() - base.markers[0, -1, :, 2].mean()) > 0.005, name
+
+
+def _every_term():
+    from bayes_disc.physics import discrepancy, nature
+    from bayes_disc.physics.terms import TERMS, Term
+    found = list(TERMS.values())
+    for module in (nature, discrepancy):
+        found += [t for t in vars(module).values() if isinstance(t, Term)]
+    return found
+
+
+@pytest.mark.parametrize("term", _every_term(), ids=lambda t: t.id)
+def test_hooks_the_kernel_skips_at_the_off_values_add_nothing_there(term):
+    """A kernel skips a term's hooks in a lane whose parameters all sit at their off values, which is exact
+    only if the hooks return zero there: checked on the hooks themselves, in random flight contexts."""
+    from bayes_disc.physics.terms import CTX_SIZE
+    E = np.array([[p.off_value] for p in term.parameters], float)
+    rng = np.random.default_rng(7)
+    worst = 0.0
+    for _ in range(300):
+        ctx = tuple(rng.normal(size=CTX_SIZE) * 3.0)
+        if term.loads is not None:
+            worst = max(worst, np.abs(term.loads.py_func(E, 0, 0, ctx)).max())
+        if term.air is not None:
+            worst = max(worst, np.abs(term.air.py_func(E, 0, 0, *rng.normal(size=4) * 3.0)).max())
+    if term.zero_when_off:
+        assert worst == 0.0, term.id
+    else:
+        assert worst > 0.0, f"{term.id} is zero at its off values: the kernel may skip it"
+
+
+@pytest.mark.parametrize("name", sorted(TERM_VALUES))
+def test_the_kernel_of_every_term_with_one_switched_on_is_that_terms_own(name):
+    """The missing-physics search fits each candidate with one kernel holding every term (the others off):
+    it must fly the candidate's kernel's flight."""
+    from bayes_disc.physics.terms import TERMS
+    every = tuple(TERMS.values())
+    ext = []
+    for term in every:
+        ext += TERM_VALUES[term.id] if term.id == name else [p.off_value for p in term.parameters]
+    y0 = _state(pqr=(4.0, -3.0, 50.0))
+    t = np.arange(121) / 120.0
+    shared = simulate(y0, HUMMEL, t, marker_body=MARKERS, terms=every, extension=ext)
+    own = simulate(y0, HUMMEL, t, marker_body=MARKERS, terms=get_terms([name]), extension=TERM_VALUES[name])
+    assert shared.status[0] == 0 and np.abs(shared.markers - own.markers).max() < 1e-9
 
 
 def test_ground_effect_acts_near_the_ground_only():

@@ -24,6 +24,8 @@ from bayes_disc.observation.config_io import ConfigError
 
 from conftest import REPO, run_config, write_short_flight
 
+pytestmark = pytest.mark.xdist_group("progress_run")   # one worker builds the module's shared run
+
 CONFIG = run_config("prog", "prior: potts_crowther", "output: out",
                     "sampler: {ensembles: 3, max_steps: 45, adapt_steps: 15, check_every: 15, min_steps: 10, seed: 5}",
                     "least_squares: {starts: 2}")

@@ -23,6 +23,8 @@ from bayes_disc.physics.windtunnel import load_wind_tunnel
 
 from conftest import require_outside_input, run_config, write_short_flight
 
+pytestmark = pytest.mark.xdist_group("report_run")   # one worker builds the module's shared run
+
 CHROMIUM = "/usr/bin/chromium"
 FIGURES = ("corner", "trace", "ranks", "residuals", "angle_of_attack", "trajectories", "posterior_predictive",
            "force_curves", "posterior_correlation")

@@ -109,6 +109,16 @@ class KernelSource:
     importable: bool
 
 
+def _switched_on(term: Term, off: int) -> tuple[list[str], str]:
+    """(guard line, indent) that skips a term's hook in a lane whose parameters all sit at their off values:
+    such a term adds nothing (:attr:`.terms.Term.zero_when_off`), and a kernel built for several terms
+    (the missing-physics search fits every candidate with one) then pays only for the terms a lane uses."""
+    if not term.zero_when_off or not term.parameters:
+        return [], ""
+    test = " or ".join(f"E[{off + i}, b] != {float(p.off_value)!r}" for i, p in enumerate(term.parameters))
+    return [f"    if {test}:"], "    "
+
+
 def _hook_chains(terms: tuple[Term, ...]) -> tuple[list[str], list[str], tuple, bool]:
     """(header lines binding the hooks, source of ``air`` and ``extra_loads``, hooks, importable)."""
     hooks, header, air, loads, off = [], [], [], [], 0
@@ -118,12 +128,14 @@ def _hook_chains(terms: tuple[Term, ...]) -> tuple[list[str], list[str], tuple, 
                 continue
             name = f"_hook_{len(hooks)}"
             hooks.append(hook)
+            guard, pad = _switched_on(term, off)
             if kind == "air":
-                air += [f"    w = {name}(E, {off}, b, t, x, y, z)",
-                        "    a = (a[0] + w[0], a[1] + w[1], a[2] + w[2])"]
+                air += guard + [f"{pad}    w = {name}(E, {off}, b, t, x, y, z)",
+                                f"{pad}    a = (a[0] + w[0], a[1] + w[1], a[2] + w[2])"]
             else:
-                loads += [f"    f = {name}(E, {off}, b, ctx)",
-                          "    a = (a[0] + f[0], a[1] + f[1], a[2] + f[2], a[3] + f[3], a[4] + f[4], a[5] + f[5])"]
+                loads += guard + [f"{pad}    f = {name}(E, {off}, b, ctx)",
+                                  f"{pad}    a = (a[0] + f[0], a[1] + f[1], a[2] + f[2], a[3] + f[3], a[4] + f[4], "
+                                  "a[5] + f[5])"]
         off += len(term.parameters)
     refs = [hook_reference(h) for h in hooks]
     importable = all(r is not None for r in refs)

@@ -93,6 +93,7 @@ WIND_TUNNEL_AERO = Term(
     "table, constant outside); forces × Q A, moment × Q A d about d2",
     parameters=(TermParameter("s_tunnel", "1", "scale of the table's bend (1: as measured)", off_value=1.0),),
     loads=_tunnel_loads,
+    zero_when_off=False,
 )
 
 

@@ -75,6 +75,8 @@ class Term:
     air: Callable | None = None
     loads: Callable | None = None
     notes: str = field(default="")
+    #: the hooks return zero when every parameter sits at its off value (the kernel then skips them)
+    zero_when_off: bool = True
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
