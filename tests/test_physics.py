@@ -131,12 +131,11 @@ def test_every_term_is_off_at_its_off_value_and_changes_the_flight_otherwise(nam
 
 
 def _every_term():
-    from bayes_disc.physics import discrepancy, nature
-    from bayes_disc.physics.terms import TERMS, Term
-    found = list(TERMS.values())
-    for module in (nature, discrepancy):
-        found += [t for t in vars(module).values() if isinstance(t, Term)]
-    return found
+    """The fitted terms, the synthetic truths' forms and the learned correction: every term a kernel can carry."""
+    from bayes_disc.physics.discrepancy import DISCREPANCY
+    from bayes_disc.physics.nature import NATURE
+    from bayes_disc.physics.terms import TERMS
+    return [*TERMS.values(), *NATURE.values(), DISCREPANCY]
 
 
 @pytest.mark.parametrize("term", _every_term(), ids=lambda t: t.id)
