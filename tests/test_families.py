@@ -67,15 +67,15 @@ def test_original_formulas_hold_as_written():
     ctx[16] = 1.0                                      # d3 = z
     ctx[7] = 10.0                                      # v_a along x
     ctx[13:16] = [0.0, 1.0, 0.0]                       # d2 = y
-    E = np.array([[0.4], [0.0], [0.0]])
-    fx, fy, fz, *_ = TERMS["ground_effect"].loads(E, 0, 0, ctx)
+    E = np.array([0.4, 0.0, 0.0])
+    fx, fy, fz, *_ = TERMS["ground_effect"].loads(E, 0, ctx)
     assert np.isclose(np.hypot(fx, fz), 0.4 * np.exp(-1.0) * 61.5 * 0.057)
-    E = np.array([[0.05], [1.0]])
-    _, fy, *_ = TERMS["side_force"].loads(E, 0, 0, ctx)
+    E = np.array([0.05, 1.0])
+    _, fy, *_ = TERMS["side_force"].loads(E, 0, ctx)
     mu = 40.0 * 0.269 / 20.0
     assert np.isclose(fy, 0.05 * mu * 61.5 * 0.057)
-    E = np.array([[0.05], [0.5]])
-    _, fy_half, *_ = TERMS["side_force"].loads(E, 0, 0, ctx)
+    E = np.array([0.05, 0.5])
+    _, fy_half, *_ = TERMS["side_force"].loads(E, 0, ctx)
     assert np.isclose(fy_half, 0.05 * np.sqrt(mu) * 61.5 * 0.057)
 
 

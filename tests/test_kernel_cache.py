@@ -65,8 +65,8 @@ def test_hooks_defined_inside_a_function_are_not_importable():
     import numba as nb
 
     @nb.njit(inline="always")
-    def local_air(E, off, b, t, x, y, z):
-        return (E[off, b], 0.0, 0.0)
+    def local_air(E, off, t, x, y, z):
+        return (E[off], 0.0, 0.0)
 
     assert hook_reference(TERMS["wind"].air) == ("bayes_disc.physics.terms", "_wind_air")
     assert hook_reference(local_air) is None

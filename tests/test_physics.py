@@ -143,15 +143,15 @@ def test_hooks_the_kernel_skips_at_the_off_values_add_nothing_there(term):
     """A kernel skips a term's hooks in a lane whose parameters all sit at their off values, which is exact
     only if the hooks return zero there: checked on the hooks themselves, in random flight contexts."""
     from bayes_disc.physics.terms import CTX_SIZE
-    E = np.array([[p.off_value] for p in term.parameters], float)
+    E = np.array([p.off_value for p in term.parameters], float)
     rng = np.random.default_rng(7)
     worst = 0.0
     for _ in range(300):
         ctx = tuple(rng.normal(size=CTX_SIZE) * 3.0)
         if term.loads is not None:
-            worst = max(worst, np.abs(term.loads.py_func(E, 0, 0, ctx)).max())
+            worst = max(worst, np.abs(term.loads.py_func(E, 0, ctx)).max())
         if term.air is not None:
-            worst = max(worst, np.abs(term.air.py_func(E, 0, 0, *rng.normal(size=4) * 3.0)).max())
+            worst = max(worst, np.abs(term.air.py_func(E, 0, *rng.normal(size=4) * 3.0)).max())
     if term.zero_when_off:
         assert worst == 0.0, term.id
     else:
@@ -258,7 +258,7 @@ def test_kernel_rhs_template_equals_the_readable_equations():
     cf = tuple(coef.as_array() * scale)
     kd = (env.g, (Id - Ia) / Id, 1.0 / m, 1.0 / Id, 1.0 / Ia, m, A, d, rho)
     for y in (_state(), _state(speed=9.0, pitch=0.5, roll=-0.3, pqr=(-4.0, 6.0, 80.0))):
-        got = np.array(rhs.rhs(0.0, tuple(y), cf, np.zeros((1, 1)), 0, kd))
+        got = np.array(rhs.rhs(0.0, tuple(y), cf, (0.0,), kd))
         want = state_derivative(0.0, y, coef, disc, env)
         np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
 

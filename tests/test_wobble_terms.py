@@ -110,14 +110,14 @@ def test_rate_coupling_moments_and_their_antisymmetric_part():
     ctx = _context(p, q, r, Q)
     qad = Q * Disc().area * Disc().diameter
     d1, d2 = ctx[CTX_D1X:CTX_D1X + 3], ctx[CTX_D2X:CTX_D2X + 3]
-    out = np.array(rc.loads(np.array([[0.007], [-0.002]]), 0, 0, ctx))
+    out = np.array(rc.loads(np.array([0.007, -0.002]), 0, ctx))
     assert np.allclose(out[:3], 0.0)
     np.testing.assert_allclose(out[3:], -0.002 * q * qad * d1 + 0.007 * p * qad * d2, rtol=1e-14)
     c = -0.004
-    anti = np.array(rc.loads(np.array([[c], [-c]]), 0, 0, ctx))[3:]
-    inertia = np.array(ir.loads(np.array([[c * qad / (Disc().Ia * r)]]), 0, 0, ctx))[3:]
+    anti = np.array(rc.loads(np.array([c, -c]), 0, ctx))[3:]
+    inertia = np.array(ir.loads(np.array([c * qad / (Disc().Ia * r)]), 0, ctx))[3:]
     np.testing.assert_allclose(anti, inertia, rtol=1e-12)
-    sym = np.array(rc.loads(np.array([[c], [c]]), 0, 0, ctx))[3:]
+    sym = np.array(rc.loads(np.array([c, c]), 0, ctx))[3:]
     assert np.linalg.norm(sym - inertia) > 0.5 * np.linalg.norm(inertia)
 
 
@@ -130,7 +130,7 @@ def test_rate_damping_moment():
     ctx[CTX_ALPHA] = 0.2
     qad = Q * Disc().area * Disc().diameter
     w = p * ctx[CTX_D1X:CTX_D1X + 3] + q * ctx[CTX_D2X:CTX_D2X + 3]
-    out = np.array(rd.loads(np.array([[0.03], [0.002]]), 0, 0, ctx))
+    out = np.array(rd.loads(np.array([0.03, 0.002]), 0, ctx))
     assert np.allclose(out[:3], 0.0)
     np.testing.assert_allclose(out[3:], (0.03 * 0.2 + 0.002 * 5.0) * qad * w, rtol=1e-14)
 

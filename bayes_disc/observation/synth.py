@@ -152,10 +152,10 @@ class SynthSpec:
         terms = [t for t in self.terms if t.air is not None]
         if not terms:
             return None
-        ext, w, off = self.extension()[:, None], np.zeros(3), 0
+        ext, w, off = self.extension(), np.zeros(3), 0
         for t in self.terms:
             if t.air is not None:
-                w += np.array(t.air(ext, off, 0, 0.0, *map(float, position)))
+                w += np.array(t.air(ext, off, 0.0, *map(float, position)))
             off += len(t.parameters)
         return w
 

@@ -66,11 +66,11 @@ def wind_velocity(states: np.ndarray, times: np.ndarray, terms=(), extension=Non
     off = 0
     for term in terms:
         if term.air is not None:
-            E = np.ascontiguousarray(ext.T)
             for b in range(B):
+                E = np.ascontiguousarray(ext[b])
                 for i in range(n):
                     x, y, z = states[b, i, :3]
-                    wind[b, i] += term.air(E, off, b, float(times[i]), x, y, z)
+                    wind[b, i] += term.air(E, off, float(times[i]), x, y, z)
         off += len(term.parameters)
     return wind
 

@@ -68,7 +68,7 @@ def basis(z, alpha, mu) -> np.ndarray:
 
 
 @nb.njit(inline="always", cache=True)
-def _discrepancy_loads(E, off, b, ctx):
+def _discrepancy_loads(E, off, ctx):
     """ΔC_X = Σ c_X,f φ_f; forces × Q A along lift, drag and d2, moments × Q A d about d2 and d1."""
     z, a = ctx[CTX_Z], ctx[CTX_ALPHA]
     mu = _advance_ratio(ctx)
@@ -80,7 +80,7 @@ def _discrepancy_loads(E, off, b, ctx):
     dc3 = 0.0
     dc4 = 0.0
     for j in range(_N_COLUMNS):
-        v = E[off + j, b] * phi[_FN_OF[j]]
+        v = E[off + j] * phi[_FN_OF[j]]
         d = _DIR_OF[j]
         if d == 0:
             dc0 += v
@@ -162,8 +162,8 @@ def coefficient_change(term: Term, values, ctx: np.ndarray) -> dict:
     from .terms import CTX_AREA, CTX_D1X, CTX_D2X, CTX_DIAM, CTX_Q, _lift_direction, _unit_air
     if term.loads is None:
         return {d: 0.0 for d in DIRECTIONS}
-    E = np.asarray(values, float)[:, None]
-    fx, fy, fz, mx, my, mz = term.loads(E, 0, 0, ctx)
+    E = np.asarray(values, float)
+    fx, fy, fz, mx, my, mz = term.loads(E, 0, ctx)
     F, M = np.array([fx, fy, fz]), np.array([mx, my, mz])
     qa = ctx[CTX_Q] * ctx[CTX_AREA]
     lift, air = np.array(_lift_direction(ctx)), np.array(_unit_air(ctx))

@@ -35,14 +35,14 @@ def aerodynamic_loads(y, coefficients: Coefficients, disc: Disc, env: Environmen
     """Forces and moments of docs/conventions.md (plus any extra ``terms`` with parameters ``extension``)."""
     c = coefficients
     extension = np.zeros(0) if extension is None else np.asarray(extension, dtype=float)
-    E = extension.reshape(-1, 1)
+    E = extension
     R = quat_to_matrix(y[QUAT])
     b3 = R[:, 2]
     wind = np.zeros(3)
     off = 0
     for term in terms:
         if term.air is not None:
-            wind += np.array(term.air(E, off, 0, t, y[0], y[1], y[2]))
+            wind += np.array(term.air(E, off, t, y[0], y[1], y[2]))
         off += len(term.parameters)
     v_air = y[VEL] - wind
     D = velocity_frame(v_air, b3)
@@ -65,7 +65,7 @@ def aerodynamic_loads(y, coefficients: Coefficients, disc: Disc, env: Environmen
     off = 0
     for term in terms:
         if term.loads is not None:
-            extra = np.array(term.loads(E, off, 0, ctx))
+            extra = np.array(term.loads(E, off, ctx))
             F = F + extra[:3]
             M = M + extra[3:]
         off += len(term.parameters)

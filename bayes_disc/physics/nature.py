@@ -30,11 +30,11 @@ from .windtunnel import load_wind_tunnel, wind_tunnel_shape
 # --- ground effect with a power-law exponent in the decay ---------------------------------------------------
 
 @nb.njit(inline="always", cache=True)
-def _ground_power_loads(E, off, b, ctx):
+def _ground_power_loads(E, off, ctx):
     """ΔL = C_L,gp · exp(−(z/h)^p) · Q A along d2 × v̂_a;  ΔD = C_D,gp · exp(−(z/h)^p) · Q A along −v̂_a."""
     z = max(ctx[CTX_Z], 0.0)
-    g = math.exp(-((z / E[off + 2, b]) ** E[off + 3, b])) * ctx[CTX_Q] * ctx[CTX_AREA]
-    fx, fy, fz = _lift_drag_force(ctx, E[off, b] * g, E[off + 1, b] * g)
+    g = math.exp(-((z / E[off + 2]) ** E[off + 3])) * ctx[CTX_Q] * ctx[CTX_AREA]
+    fx, fy, fz = _lift_drag_force(ctx, E[off] * g, E[off + 1] * g)
     return (fx, fy, fz, 0.0, 0.0, 0.0)
 
 
@@ -72,10 +72,10 @@ _BEND_ALPHA, _BEND_CL, _BEND_CD, _BEND_CM = _bend_tables()
 
 
 @nb.njit(inline="always", cache=True)
-def _tunnel_loads(E, off, b, ctx):
+def _tunnel_loads(E, off, ctx):
     """ΔC_X = s · bend_X(α) for X = L, D, M; forces × Q A, moment × Q A d about d2."""
     a = ctx[CTX_ALPHA]
-    s = E[off, b]
+    s = E[off]
     qa = ctx[CTX_Q] * ctx[CTX_AREA]
     dcl = s * np.interp(a, _BEND_ALPHA, _BEND_CL)
     dcd = s * np.interp(a, _BEND_ALPHA, _BEND_CD)
@@ -104,10 +104,10 @@ _Z_FLOOR = 0.05
 
 
 @nb.njit(inline="always", cache=True)
-def _power_shear_air(E, off, b, t, x, y, z):
+def _power_shear_air(E, off, t, x, y, z):
     """w = w_ref · (max(z, 0.05 m)/z_ref)^(1/7), horizontal."""
-    f = (max(z, _Z_FLOOR) / E[off + 2, b]) ** (1.0 / 7.0)
-    return (E[off, b] * f, E[off + 1, b] * f, 0.0)
+    f = (max(z, _Z_FLOOR) / E[off + 2]) ** (1.0 / 7.0)
+    return (E[off] * f, E[off + 1] * f, 0.0)
 
 
 WIND_POWER_SHEAR = Term(
@@ -124,9 +124,9 @@ WIND_POWER_SHEAR = Term(
 # --- side force saturating with the advance ratio ------------------------------------------------------------
 
 @nb.njit(inline="always", cache=True)
-def _saturating_side_loads(E, off, b, ctx):
+def _saturating_side_loads(E, off, ctx):
     """F_Y = C_Y,s · tanh(μ/μ0) · Q A · d2,  μ = r d / 2|v_a|."""
-    mag = E[off, b] * math.tanh(_advance_ratio(ctx) / E[off + 1, b]) * ctx[CTX_Q] * ctx[CTX_AREA]
+    mag = E[off] * math.tanh(_advance_ratio(ctx) / E[off + 1]) * ctx[CTX_Q] * ctx[CTX_AREA]
     return (mag * ctx[CTX_D2X], mag * ctx[CTX_D2Y], mag * ctx[CTX_D2Z], 0.0, 0.0, 0.0)
 
 

@@ -35,19 +35,19 @@ HAS_AIR = False
 HAS_LOADS = False
 
 
-def air(E, b, t, x, y, z):
-    """Σ of the terms' wind velocities [m/s] for lane b (none here)."""
+def air(E, t, x, y, z):
+    """Σ of the terms' wind velocities [m/s] for a lane with term parameters E (none here)."""
     return (0.0, 0.0, 0.0)
 
 
-def extra_loads(E, b, ctx):
-    """Σ of the terms' world-frame force [N] and moment [N m] for lane b (none here)."""
+def extra_loads(E, ctx):
+    """Σ of the terms' world-frame force [N] and moment [N m] for a lane with term parameters E (none here)."""
     return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
 
 
-def rhs(t, y, cf, E, b, kd):
-    """dy/dt of one lane (:mod:`.rhs` docstring). cf: the 10 scaled coefficients; E, b: term parameters
-    and lane; kd = (g, (Id − Ia)/Id, 1/m, 1/Id, 1/Ia, m, A, d, ρ)."""
+def rhs(t, y, cf, E, kd):
+    """dy/dt of one lane (:mod:`.rhs` docstring). cf: the 10 scaled coefficients; E: the lane's term
+    parameters (tuple); kd = (g, (Id − Ia)/Id, 1/m, 1/Id, 1/Ia, m, A, d, ρ)."""
     g, gyro, inv_m, inv_Id, inv_Ia, m, A, d, rho = kd
     x, yy, z, vx, vy, vz, qw, qx, qy, qz, ox, oy, oz = y
     # R(q/|q|), v_W = R v_B
@@ -66,7 +66,7 @@ def rhs(t, y, cf, E, b, kd):
     r22 = 1.0 - s2 * (xx + y2)
     # air-relative velocity [m/s], world axes, then body axes u_B = Rᵀ v_a
     if HAS_AIR:
-        wnd = air(E, b, t, x, yy, z)
+        wnd = air(E, t, x, yy, z)
         ax, ay, az = vx - wnd[0], vy - wnd[1], vz - wnd[2]
     else:
         ax, ay, az = vx, vy, vz
@@ -102,7 +102,7 @@ def rhs(t, y, cf, E, b, kd):
         D2x, D2y, D2z = r01 * d1x - r00 * d1y, r11 * d1x - r10 * d1y, r21 * d1x - r20 * d1y
         ctx = (t, x, yy, z, sp, alpha, 0.5 * rho * sp2, ax, ay, az, D1x, D1y, D1z, D2x, D2y, D2z,
                r02, r12, r22, p, q, oz, A, d, m, rho, 1.0 / inv_Ia, 1.0 / inv_Id, d1x, d1y)
-        e = extra_loads(E, b, ctx)
+        e = extra_loads(E, ctx)
         dvx += e[0] * inv_m
         dvy += e[1] * inv_m
         dvz += e[2] * inv_m

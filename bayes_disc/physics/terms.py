@@ -4,12 +4,12 @@ A term is one small, self-describing unit: its equations (docstring), its extra 
 defaults and prior scales, and one or two compiled hooks that the simulator inlines into its
 right-hand side:
 
-* ``air(E, off, b, t, x, y, z) -> (wx, wy, wz)``: a wind velocity [m/s]; the aerodynamics see
+* ``air(E, off, t, x, y, z) -> (wx, wy, wz)``: a wind velocity [m/s]; the aerodynamics see
   ``v_a = v − Σ wind``.
-* ``loads(E, off, b, ctx) -> (Fx, Fy, Fz, Mx, My, Mz)``: an extra world-frame force [N] and moment
+* ``loads(E, off, ctx) -> (Fx, Fy, Fz, Mx, My, Mz)``: an extra world-frame force [N] and moment
   [N m] at the centre of mass, given the flight context ``ctx`` (layout below).
 
-``E[off + i, b]`` is the term's i-th parameter for batch lane ``b``. The hooks are plain numba functions,
+``E[off + i]`` is the term's i-th parameter for batch lane ``b``. The hooks are plain numba functions,
 so the numpy reference equations call exactly the same code.
 
 Flight context ``ctx`` (a tuple; indices are the ``CTX_*`` constants): time t [s], centre-of-mass position
@@ -86,9 +86,9 @@ class Term:
 # --- steady wind ---------------------------------------------------------------------------------------
 
 @nb.njit(inline="always", cache=True)
-def _wind_air(E, off, b, t, x, y, z):
+def _wind_air(E, off, t, x, y, z):
     """w = (w_x + s_x z, w_y + s_y z, w_z): steady, horizontal components varying linearly with height."""
-    return (E[off, b] + E[off + 3, b] * z, E[off + 1, b] + E[off + 4, b] * z, E[off + 2, b])
+    return (E[off] + E[off + 3] * z, E[off + 1] + E[off + 4] * z, E[off + 2])
 
 
 WIND = Term(
@@ -160,9 +160,9 @@ def _signed_power(x, n):
 
 
 @nb.njit(inline="always", cache=True)
-def _side_force_loads(E, off, b, ctx):
+def _side_force_loads(E, off, ctx):
     """F_Y = C_Y · sgn(μ)|μ|^n_Y · Q A · d2,  μ = r d / 2|v_a|."""
-    mag = E[off, b] * _signed_power(_advance_ratio(ctx), E[off + 1, b]) * ctx[CTX_Q] * ctx[CTX_AREA]
+    mag = E[off] * _signed_power(_advance_ratio(ctx), E[off + 1]) * ctx[CTX_Q] * ctx[CTX_AREA]
     return (mag * ctx[CTX_D2X], mag * ctx[CTX_D2Y], mag * ctx[CTX_D2Z], 0.0, 0.0, 0.0)
 
 
@@ -186,11 +186,11 @@ SIDE_FORCE = Term(
 # --- ground effect -------------------------------------------------------------------------------------
 
 @nb.njit(inline="always", cache=True)
-def _ground_effect_loads(E, off, b, ctx):
+def _ground_effect_loads(E, off, ctx):
     """ΔL = ΔC_L,ge · e^(−z/h) · Q A along d2 × v̂_a;  ΔD = ΔC_D,ge · e^(−z/h) · Q A along −v̂_a;  h = d e^(ln_h)."""
-    h = ctx[CTX_DIAM] * math.exp(E[off + 2, b])
+    h = ctx[CTX_DIAM] * math.exp(E[off + 2])
     g = math.exp(-ctx[CTX_Z] / h) * ctx[CTX_Q] * ctx[CTX_AREA]
-    fx, fy, fz = _lift_drag_force(ctx, E[off, b] * g, E[off + 1, b] * g)
+    fx, fy, fz = _lift_drag_force(ctx, E[off] * g, E[off + 1] * g)
     return (fx, fy, fz, 0.0, 0.0, 0.0)
 
 
@@ -219,16 +219,16 @@ def _shape_parameter(name: str, unit: str, description: str, sd: float) -> TermP
 
 
 @nb.njit(inline="always", cache=True)
-def _nonlinear_aero_loads(E, off, b, ctx):
+def _nonlinear_aero_loads(E, off, ctx):
     """ΔC_L = C_L2 α² + C_L3 α³, ΔC_D = C_D3 |α|³ + C_D4 α⁴, ΔC_M = C_M2 α² + C_M3 α³ (α in rad); forces × Q A,
     moment × Q A d about d2."""
     a = ctx[CTX_ALPHA]
     a2 = a * a
     qa = ctx[CTX_Q] * ctx[CTX_AREA]
-    dcl = (E[off, b] + E[off + 3, b] * a) * a2
-    dcd = (E[off + 1, b] * abs(a) + E[off + 4, b] * a2) * a2
+    dcl = (E[off] + E[off + 3] * a) * a2
+    dcd = (E[off + 1] * abs(a) + E[off + 4] * a2) * a2
     fx, fy, fz = _lift_drag_force(ctx, dcl * qa, dcd * qa)
-    pitch = (E[off + 2, b] + E[off + 5, b] * a) * a2 * qa * ctx[CTX_DIAM]
+    pitch = (E[off + 2] + E[off + 5] * a) * a2 * qa * ctx[CTX_DIAM]
     return (fx, fy, fz, pitch * ctx[CTX_D2X], pitch * ctx[CTX_D2Y], pitch * ctx[CTX_D2Z])
 
 
@@ -252,10 +252,10 @@ NONLINEAR_AERO = Term(
 # --- spin-dependent lift ---------------------------------------------------------------------------------
 
 @nb.njit(inline="always", cache=True)
-def _spin_lift_loads(E, off, b, ctx):
+def _spin_lift_loads(E, off, ctx):
     """ΔL = C_Lr · sgn(μ)|μ|^n_Lr · Q A along d2 × v̂_a,  μ = r d / 2|v_a|."""
-    mu = _signed_power(_advance_ratio(ctx), E[off + 1, b])
-    fx, fy, fz = _lift_drag_force(ctx, E[off, b] * mu * ctx[CTX_Q] * ctx[CTX_AREA], 0.0)
+    mu = _signed_power(_advance_ratio(ctx), E[off + 1])
+    fx, fy, fz = _lift_drag_force(ctx, E[off] * mu * ctx[CTX_Q] * ctx[CTX_AREA], 0.0)
     return (fx, fy, fz, 0.0, 0.0, 0.0)
 
 
@@ -273,9 +273,9 @@ SPIN_LIFT = Term(
 # --- roll moment coupled to the advance ratio --------------------------------------------------------------
 
 @nb.njit(inline="always", cache=True)
-def _roll_spin_loads(E, off, b, ctx):
+def _roll_spin_loads(E, off, ctx):
     """ΔR = C_Rμ · sgn(μ)|μ|^n_Rμ · Q A d about d1,  μ = r d / 2|v_a|."""
-    roll = E[off, b] * _signed_power(_advance_ratio(ctx), E[off + 1, b]) * ctx[CTX_Q] * ctx[CTX_AREA] * ctx[CTX_DIAM]
+    roll = E[off] * _signed_power(_advance_ratio(ctx), E[off + 1]) * ctx[CTX_Q] * ctx[CTX_AREA] * ctx[CTX_DIAM]
     return (0.0, 0.0, 0.0, roll * ctx[CTX_D1X], roll * ctx[CTX_D1Y], roll * ctx[CTX_D1Z])
 
 
@@ -293,9 +293,9 @@ ROLL_SPIN_COUPLING = Term(
 # --- the instrumented disc's inertia ratio ---------------------------------------------------------------
 
 @nb.njit(inline="always", cache=True)
-def _inertia_ratio_loads(E, off, b, ctx):
+def _inertia_ratio_loads(E, off, ctx):
     """ΔM = ε_I · Ia · r · (p d2 − q d1): the gyroscopic moment of an axial inertia Ia (1 + ε_I) (:data:`INERTIA_RATIO`)."""
-    s = E[off, b] * ctx[CTX_IA] * ctx[CTX_R]
+    s = E[off] * ctx[CTX_IA] * ctx[CTX_R]
     p, q = ctx[CTX_P], ctx[CTX_QRATE]
     return (0.0, 0.0, 0.0,
             s * (p * ctx[CTX_D2X] - q * ctx[CTX_D1X]),
@@ -351,11 +351,11 @@ of the real throws by itself (1.01 needs Ia/Id > 2: no rigid disc).""",
 # --- cross-coupled rate moments ------------------------------------------------------------------------
 
 @nb.njit(inline="always", cache=True)
-def _rate_coupling_loads(E, off, b, ctx):
+def _rate_coupling_loads(E, off, ctx):
     """ΔR = C_Rq q Q A d about d1,  ΔM = C_Mp p Q A d about d2 (:data:`RATE_COUPLING`)."""
     qad = ctx[CTX_Q] * ctx[CTX_AREA] * ctx[CTX_DIAM]
-    roll = E[off + 1, b] * ctx[CTX_QRATE] * qad
-    pitch = E[off, b] * ctx[CTX_P] * qad
+    roll = E[off + 1] * ctx[CTX_QRATE] * qad
+    pitch = E[off] * ctx[CTX_P] * qad
     return _d_frame_moment(roll, pitch, ctx)
 
 
@@ -390,10 +390,10 @@ Hummel 2003, flight f2302): a cross-coupling as large as the damping itself is o
 # --- wobble damping that depends on the angle of attack and the wobble amplitude ---------------------------
 
 @nb.njit(inline="always", cache=True)
-def _rate_damping_loads(E, off, b, ctx):
+def _rate_damping_loads(E, off, ctx):
     """ΔM = (C_wα α + C_ww |ω⊥|) (p d1 + q d2) Q A d,  |ω⊥| = √(p² + q²) (:data:`RATE_DAMPING`)."""
     p, q = ctx[CTX_P], ctx[CTX_QRATE]
-    c = (E[off, b] * ctx[CTX_ALPHA] + E[off + 1, b] * math.sqrt(p * p + q * q)) * ctx[CTX_Q] * ctx[CTX_AREA] * ctx[CTX_DIAM]
+    c = (E[off] * ctx[CTX_ALPHA] + E[off + 1] * math.sqrt(p * p + q * q)) * ctx[CTX_Q] * ctx[CTX_AREA] * ctx[CTX_DIAM]
     return _d_frame_moment(c * p, c * q, ctx)
 
 
@@ -421,13 +421,13 @@ Priors: C_wα ~ N(0, 0.03²) s/rad², a change of the size of C_Mq, C_Rp (0.01 s
 # --- an aerodynamic asymmetry fixed in the disc: a moment at twice the spin --------------------------------
 
 @nb.njit(inline="always", cache=True)
-def _disc_asymmetry_loads(E, off, b, ctx):
+def _disc_asymmetry_loads(E, off, ctx):
     """R + i M = (C_Ac + i C_As) e^{−2iβ} Q A d about d1, d2 (:data:`DISC_ASYMMETRY`)."""
     c, s = ctx[CTX_D1BX], ctx[CTX_D1BY]                  # cos β, sin β
     cos2, sin2 = c * c - s * s, 2.0 * c * s
     qad = ctx[CTX_Q] * ctx[CTX_AREA] * ctx[CTX_DIAM]
-    roll = (E[off, b] * cos2 + E[off + 1, b] * sin2) * qad
-    pitch = (E[off + 1, b] * cos2 - E[off, b] * sin2) * qad
+    roll = (E[off] * cos2 + E[off + 1] * sin2) * qad
+    pitch = (E[off + 1] * cos2 - E[off] * sin2) * qad
     return _d_frame_moment(roll, pitch, ctx)
 
 
