@@ -30,7 +30,7 @@ from ..inference.model.config import RunConfig
 from ..inference.model.data import build_problem
 from ..inference.model.describe import data_words, flight_info, noise_info, noise_words
 from ..inference.model.inertial import load_run_throws
-from ..inference.fitting.joint_region import literature_tests
+from ..inference.fitting.joint_region import literature_tests, p_text
 from ..inference.fitting.leastsq import START_FLIGHTS, fit_least_squares, noise_text
 from ..inference.fitting.profile import MAX_LOWER_REFITS, lowest_point, profiles_through_lowest
 from ..inference.fitting.profile_interval import profile_interval
@@ -447,9 +447,8 @@ def _literature_tests(problem, ls, out: Path) -> None:
                                "data better than it; the intervals are those of the optimum found")
                 continue
             where = "inside" if t.inside else "outside"
-            p = "p < 0.001" if t.p_value < 1e-3 else f"p = {t.p_value:.2g}"
             logger.info(f"{key} ({t.dof} coefficients): profile deviance W = {t.deviance:.4g}, {where} the "
-                        f"joint 90 % region ({p})"
+                        f"joint 90 % region ({p_text(t.p_value)})"
                         + ("" if t.converged else "; its fit stopped at its budget, so W is an upper bound"))
         (out / LITERATURE_TESTS).write_text(json.dumps({k: t.to_dict() for k, t in tests.items()}, indent=1))
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..inference.fitting.joint_region import p_text
 from .sections import Raw, Section, esc, fmt, fmt_count, fmt_estimate, fmt_percent, fmt_scaled, table
 
 LIT_LABELS = {"potts_crowther": "Potts & Crowther 2000", "hummel2002": "Hummel & Hubbard 2002 (Table 2)"}
@@ -363,7 +364,7 @@ def literature_test_note(summary: dict) -> str:
                          "reports is not the lowest point and these values fit the data better")
             continue
         where = "inside" if t["inside_90"] else "outside"
-        p = "p &lt; 0.001" if t["p_value"] < 1e-3 else f"p = {t['p_value']:.2g}"
+        p = esc(p_text(t["p_value"]))
         bound = "" if t["converged"] else " (an upper bound: its fit stopped at its budget)"
         items.append(f"<b>{esc(LIT_LABELS.get(key, key))}</b>, its {t['dof']} values together: "
                      f"W = {fmt(t['deviance'])}{bound}, {where} the data's joint 90 % region ({p})")

@@ -40,6 +40,11 @@ JOINT_LEVEL = 0.9
 JOINT_NFEV = 1000
 
 
+def p_text(p: float) -> str:
+    """A p-value as the log and the report print it: "p < 0.001", else "p = 0.012" (two significant digits)."""
+    return "p < 0.001" if p < 1e-3 else f"p = {p:.2g}"
+
+
 @dataclass(frozen=True)
 class JointTest:
     """The profile deviance of a set of coefficient values (:func:`profile_deviance`)."""
