@@ -1,6 +1,7 @@
 """A least-squares optimum that is not the lowest point: the profiles that reach below it, and the refit from
 there before the profiles start again (bayes_disc.inference.fitting.profile.LowerOptimum, leastsq.refit_from_lower,
-run.posterior_approximation)."""
+run.posterior_approximation), and the refit from a published coefficient set that fits better than the optimum
+(joint_region.literature_tests_through_lowest)."""
 import json
 from dataclasses import replace
 
@@ -18,7 +19,9 @@ from bayes_disc.inference.fitting.residuals import whitened_residuals
 from bayes_disc.inference.model.problem import Problem
 from bayes_disc.inference.fitting.profile import (LOWER_OPTIMUM_DEVIANCE, LowerOptimum, lowest_point, profile_paths,
                                                   profile_side, ridge_first)
+from bayes_disc.inference.fitting.joint_region import literature_tests_through_lowest
 from bayes_disc.jobs.sample import posterior_approximation
+from bayes_disc.report.content import _lower_optimum_rows
 from bayes_disc.observation.synth import DEFAULT_MARKERS, LaunchSpec, SynthSpec, synthesize
 
 from conftest import REPO, keep_flights
@@ -161,3 +164,24 @@ def test_identifiability_profiles_refit_a_least_squares_that_stopped_short(tmp_p
     assert min(min(p["deviance"]) for p in r["profiles"].values()) > -LOWER_OPTIMUM_DEVIANCE
     cl0 = r["coefficients"]["CL0"]
     assert cl0["value"] == pytest.approx(held["lowest"].theta[0], abs=0.01 * sd[0])
+
+
+def test_a_published_set_below_the_optimum_refits_the_least_squares(displaced):
+    """A coefficient set whose values held together fit better than the optimum (here the lowest optimum's own
+    coefficients, tested against the displaced one) has the least squares refitted from its conditional optimum;
+    its test is then against the new optimum, and a set above the optimum changes nothing."""
+    p, ls, local, _ = displaced
+    best = dict(zip(p.names[:p.n_coef], map(float, ls.theta[:p.n_coef])))
+    seen = []
+    tests, new = literature_tests_through_lowest(p, local, 200, sets={"best": best},
+                                                 on_refit=lambda key, test, fit: seen.append((key, test.deviance)))
+    assert len(seen) == 1 and seen[0][0] == "best" and seen[0][1] < -LOWER_OPTIMUM_DEVIANCE
+    assert len(new.lower_optima) == 1 and new.lower_optima[0]["joint_test"] == "best"
+    assert new.cost < new.lower_optima[0]["earlier_cost"] - 4.0
+    sd = np.sqrt(np.diag(ls.cov))
+    assert np.max(np.abs(new.theta - ls.theta) / sd) < 0.01
+    assert not tests["best"].below_optimum and abs(tests["best"].deviance) < 0.1
+    rows = dict(_lower_optimum_rows(new.to_dict()))
+    assert "the best values held together fitted better" in rows["refit 1 from a lower point"]
+    again, same = literature_tests_through_lowest(p, ls, 200, sets={"best": best})
+    assert same is ls and not again["best"].below_optimum

@@ -30,7 +30,7 @@ from ..inference.model.config import RunConfig
 from ..inference.model.data import build_problem
 from ..inference.model.describe import data_words, flight_info, noise_info, noise_words
 from ..inference.model.inertial import load_run_throws
-from ..inference.fitting.joint_region import literature_tests, p_text
+from ..inference.fitting.joint_region import literature_tests, literature_tests_through_lowest, p_text
 from ..inference.fitting.leastsq import START_FLIGHTS, fit_least_squares, noise_text
 from ..inference.fitting.profile import MAX_LOWER_REFITS, lowest_point, profiles_through_lowest
 from ..inference.fitting.profile_interval import profile_interval
@@ -418,28 +418,42 @@ def _prepare_sampling(cfg: RunConfig, problem, out: Path, resume: bool, progress
         chosen["problem"], chosen["ic"] = initial_condition_prior(p, optimum, cfg, out, resume=False)
         chosen["ls"] = optimum
         return chosen["problem"]
-    proposal, ls = posterior_approximation(problem, ls, cfg.sampler.processes, out, progress=progress,
-                                           max_nfev=cfg.least_squares.max_nfev, with_prior=with_prior)
-    _literature_tests(problem, ls, out)
+    # the joint tests first: a published set that fits better than the optimum moves it before the profiles
+    ls = _literature_tests(problem, ls, out, cfg.least_squares.max_nfev)
+    proposal, profiled = posterior_approximation(problem, ls, cfg.sampler.processes, out, progress=progress,
+                                                 max_nfev=cfg.least_squares.max_nfev, with_prior=with_prior)
+    if profiled is not ls:          # the profiles refitted it: the tests are against the new optimum
+        ls = _literature_tests(problem, profiled, out, cfg.least_squares.max_nfev, refit=False)
     problem, ic = chosen["problem"], chosen["ic"]
     (out / "chains").mkdir(exist_ok=True)
     (out / "chains" / RUN_KEY).write_text(json.dumps(run_key(cfg, problem), indent=1))
     return Prepared(raw, problem, ls.to_dict(), proposal, None, ic, chosen["ls"])
 
 
-def _literature_tests(problem, ls, out: Path) -> None:
+def _literature_tests(problem, ls, out: Path, max_nfev: int, refit: bool = True):
     """Each published coefficient set against the data's joint profile region
     (:func:`bayes_disc.inference.fitting.joint_region.literature_tests`): logged and written to
-    ``<out>/literature_tests.json`` (summary.json ``literature_tests``). When a set's fit fails, the warning
-    names it and no set's test is written; a set whose fit went below the optimum gets a warning instead of a
-    verdict line."""
+    ``<out>/literature_tests.json`` (summary.json ``literature_tests``). With ``refit``, a set whose values held
+    together fit better than the optimum has the least squares refitted from its conditional optimum (warned, the
+    least-squares files rewritten) and the sets tested again. When a set's fit fails, the warning names it and no
+    set's test is written; a set still below the optimum gets a warning instead of a verdict line. Returns the
+    optimum the tests are against."""
+    def refitted(key, test, new):
+        logger.warning(f"holding the {key} values reached a lower cost than the least-squares optimum (W = "
+                       f"{test.deviance:.4g}), which was not the lowest point: the least squares are refitted from "
+                       f"there (cost {new.cost:.1f}; the earlier optimum's with the new noise scales "
+                       f"{new.lower_optima[-1]['earlier_cost']:.1f})")
+        _save_least_squares(new, out)
     with stage("joint tests", "the published coefficient sets against the joint profile region"):
         try:
-            tests = literature_tests(problem, ls)
+            if refit:
+                tests, ls = literature_tests_through_lowest(problem, ls, max_nfev, on_refit=refitted)
+            else:
+                tests = literature_tests(problem, ls)
         except RuntimeError as e:
             logger.warning(f"no joint test of the published coefficient sets: {e}")
             (out / LITERATURE_TESTS).unlink(missing_ok=True)
-            return
+            return ls
         for key, t in tests.items():
             if t.below_optimum:
                 logger.warning(f"holding the {key} values reached a lower cost than the least-squares optimum (W = "
@@ -451,6 +465,7 @@ def _literature_tests(problem, ls, out: Path) -> None:
                         f"joint 90 % region ({p_text(t.p_value)})"
                         + ("" if t.converged else "; its fit stopped at its budget, so W is an upper bound"))
         (out / LITERATURE_TESTS).write_text(json.dumps({k: t.to_dict() for k, t in tests.items()}, indent=1))
+    return ls
 
 
 def _write_outputs(cfg: RunConfig, problem, chains, ls_dict: dict, throws, steps, out: Path, t0: float, ic: dict):

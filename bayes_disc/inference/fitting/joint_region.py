@@ -18,18 +18,22 @@ covariance; along a curved valley (the pitching-moment trio) it follows the vall
 truths of varied four-flight designs is measured by ``benchmarks/bench_profile_coverage.py``.
 
 :func:`literature_tests` puts every published coefficient set to this test, each on the coefficients it gives.
+A set whose held values reach a lower cost than θ̂ shows that θ̂ was not the lowest point:
+:func:`literature_tests_through_lowest` then refits the least squares from that set's conditional optimum and
+tests again, as the profile paths do with a lower point (:func:`.profile.profiles_through_lowest`).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 from scipy.stats import chi2
 
 from ...physics.constants import LITERATURE
 from ..model.problem import Problem
-from .leastsq import LeastSquaresResult
-from .profile import LOWER_OPTIMUM_DEVIANCE
+from .leastsq import LeastSquaresResult, refit_from_lower
+from .profile import LOWER_OPTIMUM_DEVIANCE, MAX_LOWER_REFITS
 from .reference import conditional_optimum
 from .residuals import whitened_costs
 
@@ -52,6 +56,8 @@ class JointTest:
     values: dict        # {name: value} held
     deviance: float     # W (negative where the fit went below the optimum: :attr:`below_optimum`)
     converged: bool     # False: the fit stopped at its budget, and W is an upper bound
+    #: the conditional optimum x̂(c_H) (every parameter; not written to summary.json)
+    x: np.ndarray | None = field(default=None, repr=False, compare=False)
 
     @property
     def dof(self) -> int:
@@ -107,11 +113,19 @@ def profile_deviance(problem: Problem, ls: LeastSquaresResult, values: dict,
     held = np.array([coef.index(n) for n in values])
     res = conditional_optimum(problem, ls, np.array([float(values[n]) for n in values]), held, max_nfev=max_nfev)
     deviance = 2.0 * (float(whitened_costs(res.x, problem, ls.sigma)[0]) - float(ls.cost))
-    return JointTest({n: float(v) for n, v in values.items()}, deviance, res.status > 0)
+    return JointTest({n: float(v) for n, v in values.items()}, deviance, res.status > 0, np.asarray(res.x))
 
 
-def literature_tests(problem: Problem, ls: LeastSquaresResult) -> dict[str, JointTest]:
+def literature_tests(problem: Problem, ls: LeastSquaresResult, sets: dict | None = None) -> dict[str, JointTest]:
     """Every published set (:data:`bayes_disc.physics.constants.LITERATURE`) tested on the coefficients it gives.
+
+    Parameters
+    ----------
+    problem : Problem
+    ls : LeastSquaresResult
+        The least-squares optimum.
+    sets : dict, optional
+        {key: {coefficient name: value}} to test instead of the published sets.
 
     Returns
     -------
@@ -119,9 +133,50 @@ def literature_tests(problem: Problem, ls: LeastSquaresResult) -> dict[str, Join
         {set key: JointTest}; a set that gives none of the model's coefficients is left out.
     """
     coef = set(problem.names[:problem.n_coef])
+    sets = {key: lit.values for key, lit in LITERATURE.items()} if sets is None else sets
     out = {}
-    for key, lit in LITERATURE.items():
-        values = {n: v for n, v in lit.values.items() if n in coef}
+    for key, given in sets.items():
+        values = {n: v for n, v in given.items() if n in coef}
         if values:
             out[key] = profile_deviance(problem, ls, values)
     return out
+
+
+def literature_tests_through_lowest(problem: Problem, ls: LeastSquaresResult, max_nfev: int = 200,
+                                    sets: dict | None = None, on_refit: Callable | None = None
+                                    ) -> tuple[dict[str, JointTest], LeastSquaresResult]:
+    """:func:`literature_tests`, after refitting the least squares from the conditional optimum of any set whose
+    held values fit better than the optimum (the lowest such set first; at most
+    :data:`.profile.MAX_LOWER_REFITS` refits, after which a set may still be below: :attr:`JointTest.below_optimum`).
+
+    Parameters
+    ----------
+    problem : Problem
+    ls : LeastSquaresResult
+        The least-squares optimum found before.
+    max_nfev : int
+        Evaluation budget of each refinement round of a refit.
+    sets : dict, optional
+        As in :func:`literature_tests`.
+    on_refit : callable, optional
+        Called as ``on_refit(key, test, ls)`` after each refit: the set, its test against the earlier optimum
+        and the new result.
+
+    Returns
+    -------
+    tests : dict
+        {set key: JointTest} against the returned optimum.
+    ls : LeastSquaresResult
+        ``ls`` itself, or its last refit (``lower_optima`` records each, with ``joint_test``: the set's key).
+    """
+    for attempt in range(MAX_LOWER_REFITS + 1):
+        tests = literature_tests(problem, ls, sets)
+        below = {k: t for k, t in tests.items() if t.below_optimum}
+        if not below or attempt == MAX_LOWER_REFITS:
+            return tests, ls
+        key, test = min(below.items(), key=lambda kt: kt[1].deviance)
+        ls = refit_from_lower(problem, ls, test.x, max_nfev=max_nfev,
+                              found={"joint_test": key, "deviance": float(test.deviance)})
+        if on_refit is not None:
+            on_refit(key, test, ls)
+    raise AssertionError("unreachable: the last attempt returns")
