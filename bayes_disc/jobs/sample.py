@@ -438,7 +438,10 @@ def _literature_tests(problem, ls, out: Path, max_nfev: int, refit: bool = True)
     least-squares files rewritten) and the sets tested again. When a set's fit fails, the warning names it and no
     set's test is written; a set still below the optimum gets a warning instead of a verdict line. Returns the
     optimum the tests are against."""
+    latest = [ls]                   # the last refit, kept should a later test's fit fail
+
     def refitted(key, test, new):
+        latest.append(new)
         logger.warning(f"holding the {key} values reached a lower cost than the least-squares optimum (W = "
                        f"{test.deviance:.4g}), which was not the lowest point: the least squares are refitted from "
                        f"there (cost {new.cost:.1f}; the earlier optimum's with the new noise scales "
@@ -453,7 +456,7 @@ def _literature_tests(problem, ls, out: Path, max_nfev: int, refit: bool = True)
         except RuntimeError as e:
             logger.warning(f"no joint test of the published coefficient sets: {e}")
             (out / LITERATURE_TESTS).unlink(missing_ok=True)
-            return ls
+            return latest[-1]
         for key, t in tests.items():
             if t.below_optimum:
                 logger.warning(f"holding the {key} values reached a lower cost than the least-squares optimum (W = "
