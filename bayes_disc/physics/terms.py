@@ -9,8 +9,9 @@ right-hand side:
 * ``loads(E, off, ctx) -> (Fx, Fy, Fz, Mx, My, Mz)``: an extra world-frame force [N] and moment
   [N m] at the centre of mass, given the flight context ``ctx`` (layout below).
 
-``E[off + i]`` is the term's i-th parameter for batch lane ``b``. The hooks are plain numba functions,
-so the numpy reference equations call exactly the same code.
+``E[off + i]`` is the term's i-th parameter (``E``: the lane's term parameters, a tuple inside the compiled
+integrator, a 1-D array in the numpy reference equations). The hooks are plain numba functions, so the numpy
+reference equations call exactly the same code.
 
 Flight context ``ctx`` (a tuple; indices are the ``CTX_*`` constants): time t [s], centre-of-mass position
 x, y, z [m], air speed |v_a| [m/s], angle of attack α [rad], dynamic pressure Q = ρ|v_a|²/2 [Pa], v_a [m/s],
