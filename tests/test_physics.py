@@ -1,5 +1,7 @@
 """Physics checks that can fail: conservation laws, the parabola, mirror symmetry, solve_ivp agreement,
 wild parameters."""
+import platform
+
 import numpy as np
 import pytest
 
@@ -276,3 +278,34 @@ def test_one_extension_vector_serves_a_whole_batch():
         np.testing.assert_array_equal(off.states[b], simulate(y0[b], HUMMEL, t, terms=terms).states[0])
         np.testing.assert_allclose(off.states[b], simulate(y0[b], HUMMEL, t).states[0], rtol=0, atol=1e-12)
     assert np.abs(batch.states[:, -1, :3] - off.states[:, -1, :3]).max() > 1e-3    # the parameters act
+
+
+def _packed_share(terms) -> float:
+    """Share of packed (…pd) among the double-precision arithmetic instructions (add, sub, mul, div, fused
+    multiply-add) of a 4-lane kernel's compiled ``integrate``, compiled in memory so that its assembly is kept."""
+    import re
+    from bayes_disc.physics.codegen import kernel_source
+    from bayes_disc.physics.kernel import LANES_SMALL
+    from bayes_disc.physics.kernel_cache import compile_in_memory
+    from bayes_disc.physics.tableaux import DEFAULT_METHOD, get_tableau
+    f = compile_in_memory(kernel_source(terms, get_tableau(DEFAULT_METHOD), LANES_SMALL, cache=False))
+    y0 = _state()[None]
+    ext = np.array([[p.off_value for t in terms for p in t.parameters]])
+    f(y0, HUMMEL[None], ext.reshape(1, -1), np.array([0.175, 0.00235, 0.00122, 0.269, 0.057, 1.23, 9.81]),
+      0.0, np.array([0.0, 0.1]), MARKERS, 1.7, 1e4, 1e3, 0.0, 2.0, np.zeros((1, 0, 13)), np.zeros((1, 0, 3, 3)),
+      np.zeros(1, np.int64))
+    asm = f.inspect_asm(f.signatures[0])
+    ops = re.findall(r"^\s*v?(?:add|sub|mul|div|f[n]?m(?:add|sub)\d*)([ps]d)\b", asm, flags=re.MULTILINE)
+    return ops.count("pd") / max(len(ops), 1)
+
+
+@pytest.mark.skipif(platform.machine().lower() not in ("x86_64", "amd64"),
+                    reason="counts x86-64 packed and scalar double-precision instructions")
+def test_a_kernel_carrying_a_term_is_vectorised_like_the_base_kernel():
+    """LLVM vectorises the base kernel's loop over the lanes of a group; a term's hooks must not stop it (a hook
+    that reads an array inside that loop does, and the kernel then runs several times slower): the packed share
+    of the compiled integrator's double-precision arithmetic, with a term, is at least half the base kernel's."""
+    base = _packed_share(())
+    term = _packed_share(get_terms(["disc_asymmetry"]))
+    assert base > 0.5, base
+    assert term > 0.5 * base, (term, base)
