@@ -287,13 +287,12 @@ def _packed_share(terms) -> float:
     from bayes_disc.physics.codegen import kernel_source
     from bayes_disc.physics.kernel import LANES_SMALL
     from bayes_disc.physics.kernel_cache import compile_in_memory
+    from bayes_disc.physics.simulator import _constants
     from bayes_disc.physics.tableaux import DEFAULT_METHOD, get_tableau
     f = compile_in_memory(kernel_source(terms, get_tableau(DEFAULT_METHOD), LANES_SMALL, cache=False))
-    y0 = _state()[None]
     ext = np.array([[p.off_value for t in terms for p in t.parameters]])
-    f(y0, HUMMEL[None], ext.reshape(1, -1), np.array([0.175, 0.00235, 0.00122, 0.269, 0.057, 1.23, 9.81]),
-      0.0, np.array([0.0, 0.1]), MARKERS, 1.7, 1e4, 1e3, 0.0, 2.0, np.zeros((1, 0, 13)), np.zeros((1, 0, 3, 3)),
-      np.zeros(1, np.int64))
+    f(_state()[None], HUMMEL[None], ext, _constants(Disc(), Environment()), 0.0, np.array([0.0, 0.1]), MARKERS,
+      1.7, 1e4, 1e3, 0.0, 2.0, np.zeros((1, 0, 13)), np.zeros((1, 0, 3, 3)), np.zeros(1, np.int64))
     asm = f.inspect_asm(f.signatures[0])
     ops = re.findall(r"^\s*v?(?:add|sub|mul|div|f[n]?m(?:add|sub)\d*)([ps]d)\b", asm, flags=re.MULTILINE)
     return ops.count("pd") / max(len(ops), 1)
