@@ -25,7 +25,9 @@ _MOREBITS = 6.123233995736765886130e-17
 _V_TINY = 1e-150                    # in-plane air speed [m/s] below which the D frame is undefined
 
 
-@nb.njit(forceinline=True, fastmath=FASTMATH)
+# inlined by numba (its IR), not only by LLVM: a copy already compiled on its own (a call from Python) would
+# otherwise be linked into a kernel as a call, and the kernel's loop over lanes would not be vectorised
+@nb.njit(inline="always", fastmath=FASTMATH)
 def alpha_and_inverse(w, vpar):
     """(α, 1/V∥) for α = atan2(w, V∥), V∥ ≥ 0 [rad, s/m], branch-free, one division for both.
 
