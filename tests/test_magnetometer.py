@@ -156,9 +156,9 @@ def test_the_config_switch_and_a_log_without_magnetometer(tmp_path):
         cfg = load_config(tmp_path / "run.yaml")
         assert cfg.imu[0].magnetometer is expect
         throw = InertialThrow(rec.log, "a.csv", "ok", "synthetic", magnetometer=cfg.imu[0].magnetometer)
-        assert inertial_model(throw, 9.81).magnetometer is expect
+        assert inertial_model(throw, Environment()).magnetometer is expect
     bare = replace(rec.log, mag=None)
-    assert not inertial_model(InertialThrow(bare, "a.csv", "ok", "synthetic"), 9.81).magnetometer
+    assert not inertial_model(InertialThrow(bare, "a.csv", "ok", "synthetic"), Environment()).magnetometer
     with pytest.raises(ValueError, match="magnetometer"):
         InertialMeasurements(bare, 9.81, period=0.0125, magnetometer=True)
     (tmp_path / "run.yaml").write_text("name: t\nimu:\n  - {file: a.csv, format: flatball-ins, magnetometer: 1}\n")

@@ -242,7 +242,7 @@ SERIES_WORDS = {"along": "along-track", "lateral": "lateral", "normal": "vertica
                 "acc_x": "accelerometer x (sensor axis)", "acc_y": "accelerometer y (sensor axis)",
                 "acc_z": "accelerometer z (disc normal)",
                 "mag_x": "magnetometer x (sensor axis)", "mag_y": "magnetometer y (sensor axis)",
-                "mag_z": "magnetometer z (disc normal)"}
+                "mag_z": "magnetometer z (disc normal)", "baro": "barometer (height)"}
 
 
 def describe_where(fp: dict, n_flights: int) -> str:

@@ -439,9 +439,9 @@ def inertial_gyro(problem, theta: np.ndarray, k: int):
     from .residuals import channel_runs
     for c, _, extra, pred, air in channel_runs(problem, theta, k):
         if isinstance(c, InertialMeasurements):
-            t = c.sample_times_for(c.split(extra)["period"])[0]
+            t = c.sample_times_for(c.split(extra)["period"])[0, : c.n_flight]
             speed = np.interp(t, np.asarray(c.times, float), air.speed[0])
-            return t, np.asarray(c.log.gyro, float), pred[0, :, :3], speed
+            return t, np.asarray(c.log.gyro, float), pred[0, : c.n_flight, :3], speed
     return None
 
 

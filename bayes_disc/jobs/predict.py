@@ -41,7 +41,7 @@ log = logging.getLogger(__name__)
 #: channel name, unit and the noise-group names (without ``_<flight>``) it pools, per observation model
 CHANNELS = {"markers": ("m", ("sigma",)), "gyro": ("rad/s", ("sigma_gyro_axial", "sigma_gyro_transverse")),
             "acc": ("m/s²", ("sigma_acc_axial", "sigma_acc_transverse")),
-            "mag": ("µT", ("sigma_mag_axial", "sigma_mag_transverse"))}
+            "mag": ("µT", ("sigma_mag_axial", "sigma_mag_transverse")), "baro": ("Pa", ("sigma_baro",))}
 
 
 def channel_rms(problem, theta: np.ndarray, k: int) -> dict:

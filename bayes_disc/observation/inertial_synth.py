@@ -54,6 +54,12 @@ class LoggerSpec:
         Magnetometer hard-iron offset h in sensor axes [µT].
     mag_noise : (2,) tuple
         Magnetometer noise sd (axial z, transverse x/y) [µT].
+    baro_dynamic : float
+        Pressure coefficient c_q of the barometer's port [–] (:mod:`.models.barometer`).
+    baro_lag : float
+        Time constant τ_b of the barometer's first-order lag [s] (> 0).
+    baro_noise : float
+        Barometer reading noise sd [Pa] (every reading differs from the previous one).
     """
 
     offset: tuple = (0.02, 0.0, -0.01)
@@ -68,6 +74,9 @@ class LoggerSpec:
     field_uT: tuple = (20.0, 0.0, -40.0)
     mag_hard_iron: tuple = (0.0, 0.0, 0.0)
     mag_noise: tuple = (0.0, 0.0)
+    baro_dynamic: float = 0.0
+    baro_lag: float = 0.7
+    baro_noise: float = 1.0
     truth: dict = field(default_factory=dict, compare=False)
 
 
@@ -170,12 +179,8 @@ def synthetic_log(name: str, initial_state: np.ndarray, coefficients: Coefficien
 
 #: standard sea-level pressure [Pa] around which the synthetic barometer reads
 PRESSURE_PA = 101325.0
-#: air density [kg/m³] of the synthetic barometer's hydrostatic height–pressure relation
-BARO_AIR_DENSITY = 1.2
 #: period [s] of the synthetic barometer task (the flatball firmware sleeps 0.1 s between readings)
 BARO_TASK_PERIOD = 0.105
-#: sd [Pa] of the synthetic barometer's reading noise (every update differs from the previous one)
-BARO_NOISE_PA = 1.0
 
 
 def _mag_noise(mag: np.ndarray, spec: LoggerSpec, rng: np.random.Generator) -> np.ndarray:
@@ -237,12 +242,47 @@ class RecordedThrow:
     lpf_state: np.ndarray
 
 
-def _barometer(heights: np.ndarray, period: float, rng: np.random.Generator, g: float) -> np.ndarray:
-    """Pressure [Pa] per row: hydrostatic for the height [m], read every ⌈T/P⌉ rows (T = BARO_TASK_PERIOD)
-    and held in between, each reading with Gaussian noise (BARO_NOISE_PA)."""
-    every = int(np.ceil(BARO_TASK_PERIOD / period))
+def _barometer(heights: np.ndarray, speeds: np.ndarray, spec: LoggerSpec, rng: np.random.Generator,
+               env: Environment) -> np.ndarray:
+    """Pressure [Pa] per row, as the flatball firmware's barometer task records it (:mod:`.models.barometer`).
+
+    The outside pressure p_e = p_std − ρ g z + c_q ½ ρ |v|² (p_std = :data:`PRESSURE_PA`) is taken linear
+    between rows on a grid ``SUBSTEPS`` times finer (the dynamic part only between rows in flight, so that
+    it starts at the release row and stops at the last row in flight), and the sensor follows it with the
+    first-order lag τ_b, stepped exactly for the mean of each fine step's end values (settled at the first
+    row's p_e: the disc rests before release). A reading is taken every ⌈T/P⌉ rows (T = :data:`BARO_TASK_PERIOD`), half a row before
+    the first row that shows it (read linearly on the fine grid), and held until the next, with Gaussian
+    noise of sd ``spec.baro_noise``.
+
+    Parameters
+    ----------
+    heights, speeds : (n,) arrays
+        Height [m] and speed [m/s] of the disc at each row (speed 0: at rest, > 0: in flight).
+    spec : LoggerSpec
+        The logger (port coefficient, lag, noise).
+    rng : numpy.random.Generator
+        Noise source.
+    env : Environment
+        Air density [kg/m³] and gravitational acceleration [m/s²].
+
+    Returns
+    -------
+    (n,) array
+    """
+    rows = np.arange(heights.size)
+    fine_t = np.arange((heights.size - 1) * SUBSTEPS + 1) / SUBSTEPS                  # in rows
+    flying = speeds > 0
+    both = flying[np.floor(fine_t).astype(int)] & flying[np.ceil(fine_t).astype(int)]
+    dynamic = np.where(both, np.interp(fine_t, rows, speeds ** 2), 0.0)
+    fine = PRESSURE_PA - env.rho * env.g * np.interp(fine_t, rows, heights) + spec.baro_dynamic * 0.5 * env.rho * dynamic
+    decay = np.exp(-spec.period / SUBSTEPS / spec.baro_lag)
+    sensor = np.empty_like(fine)
+    sensor[0] = fine[0]
+    for j in range(1, fine.size):
+        sensor[j] = decay * sensor[j - 1] + (1.0 - decay) * 0.5 * (fine[j - 1] + fine[j])
+    every = int(np.ceil(BARO_TASK_PERIOD / spec.period))
     reads = np.arange(0, heights.size, every)
-    value = PRESSURE_PA - BARO_AIR_DENSITY * g * heights[reads] + rng.normal(0.0, BARO_NOISE_PA, reads.size)
+    value = np.interp(np.maximum(reads - 0.5, 0.0), fine_t, sensor) + rng.normal(0.0, spec.baro_noise, reads.size)
     return np.repeat(value, every)[: heights.size]
 
 
@@ -257,8 +297,9 @@ def recorded_throw(name: str, initial_state: np.ndarray, coefficients: Coefficie
     release state. Before release the disc rests at its release attitude with the filter settled; after
     the end it rests at its final attitude, the filter relaxing from its last in-flight value towards the
     resting one as e^(−t/τ) (the landing is not simulated either). Gyro and accelerometer noise as
-    :func:`synthetic_log` on every row; the barometer reads the hydrostatic pressure of the height every
-    ⌈0.105 s / P⌉ rows (1 Pa noise), as the flatball firmware's barometer task does.
+    :func:`synthetic_log` on every row; the barometer reads the pressure of the height (and the port's
+    share of the dynamic pressure) every ⌈0.105 s / P⌉ rows, as the flatball firmware's barometer task
+    does (:func:`_barometer`).
 
     Parameters
     ----------
@@ -300,11 +341,12 @@ def recorded_throw(name: str, initial_state: np.ndarray, coefficients: Coefficie
     acc = np.vstack([np.tile(a0, (n_pre, 1)), acc_f, acc_post])
     mag = np.vstack([np.tile(m0, (n_pre, 1)), mag_f, np.tile(m1, (n_post, 1))])
     heights = np.r_[np.full(n_pre, states[0, 2]), states[:, 2], np.full(n_post, states[-1, 2])]
+    speeds = np.r_[np.zeros(n_pre), np.linalg.norm(states[:, 3:6], axis=1), np.zeros(n_post)]
     gs = np.array([spec.gyro_noise[1], spec.gyro_noise[1], spec.gyro_noise[0]])
     as_ = np.array([spec.acc_noise[1], spec.acc_noise[1], spec.acc_noise[0]])
     noisy_gyro = gyro + rng.normal(0.0, 1.0, gyro.shape) * gs
     noisy_acc = acc + rng.normal(0.0, 1.0, acc.shape) * as_
-    pressure = _barometer(heights, spec.period, rng, env.g)
+    pressure = _barometer(heights, speeds, spec, rng, env)
     noisy_mag = _mag_noise(mag, spec, rng)
     rows = first_row + np.arange(gyro.shape[0])
 

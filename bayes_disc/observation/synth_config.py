@@ -64,6 +64,9 @@ def _logger_values(path, sec: Section, base: LoggerSpec, keys) -> LoggerSpec:
         "lpf_state": lambda: (None if sec.raw("lpf_state", None) is None
                               else tuple(sec.vector("lpf_state", 3))),
         "field_uT": lambda: tuple(sec.vector("field_uT", 3, list(base.field_uT))),
+        "baro_dynamic": lambda: sec.number("baro_dynamic", base.baro_dynamic),
+        "baro_lag": lambda: sec.number("baro_lag", base.baro_lag, positive=True),
+        "baro_noise": lambda: sec.number("baro_noise", base.baro_noise, nonnegative=True),
     }
     for k in keys:
         vals[k] = readers[k]()
@@ -76,7 +79,8 @@ def _read_imu_block(path, sec: Section, name: str, raw_flights: list) -> ImuSynt
         return None
     s = sec.section("imu")
     logger = _logger_values(path, s, LoggerSpec(), ("offset", "lpf_tau", "tilt", "period", "gyro_noise",
-                                                   "acc_noise", "gyro_bias", "acc_bias", "lpf_state", "field_uT"))
+                                                   "acc_noise", "gyro_bias", "acc_bias", "lpf_state", "field_uT",
+                                                   "baro_dynamic", "baro_lag", "baro_noise"))
     fmt = s.string("format", "flatball-ins", choices=("flatball-ins", "imu-csv"))
     default_out = f"{name}_imu" if fmt == "flatball-ins" else f"{name}_imu.csv"
     output = path.parent / s.string("output", default_out)

@@ -91,7 +91,7 @@ SERIES_LABELS = {"along": ("along-track [mm]", 1e3), "lateral": ("lateral [mm]",
                  "spin_phase": ("spin phase [mrad]", 1e3),
                  **{s: (f"{'gyro' if s.startswith('gyro') else 'accelerometer'} {s[-1]} [{u}]", 1.0)
                     for s, u in zip(INERTIAL_SERIES, INERTIAL_UNITS)},
-                 **{s: (f"magnetometer {s[-1]} [µT]", 1.0) for s in MAG_SERIES}}
+                 **{s: (f"magnetometer {s[-1]} [µT]", 1.0) for s in MAG_SERIES}, "baro": ("barometer [Pa]", 1.0)}
 
 
 def _estimate_text(est: dict) -> str:

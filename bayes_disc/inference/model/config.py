@@ -36,6 +36,7 @@ imu:                                     # inertial logs (instead of or besides 
     format: flatball-ins                 # or imu-csv
     throws: [[1007, 1344]]               # optional: release and first-impact rows per throw (default: found)
     magnetometer: true                   # use the log's magnetometer (default true when the log has one)
+    barometer: true                      # use the log's barometer (default false)
 credit: "where the data come from"       # shown in the report wherever the data are shown (licences)
 ```
 """
@@ -104,12 +105,13 @@ class FlightOption:
 @dataclass(frozen=True)
 class ImuSource:
     """One inertial log of the run: file, format, optional explicit throws (logger rows, end exclusive) and
-    whether its magnetometer is used (when the log has one)."""
+    whether its magnetometer (default) and barometer (on request) are used (when the log has them)."""
 
     file: Path
     format: str
     throws: tuple[tuple[int, int], ...] | None = None
     magnetometer: bool = True
+    barometer: bool = False
 
 
 
@@ -377,7 +379,7 @@ def _read_noise(path: Path, sec: Section, defaults: NoiseSettings | None) -> dic
 
 def _read_imu(path: Path, sec: Section) -> tuple[ImuSource, ...]:
     """The ``imu:`` list: file (relative to the config), format, optional throws [[start, end], ...],
-    ``magnetometer`` (default true)."""
+    ``magnetometer`` (default true) and ``barometer`` (default false)."""
     raw = sec.raw("imu", None)
     if raw is None:
         return ()
@@ -390,6 +392,7 @@ def _read_imu(path: Path, sec: Section) -> tuple[ImuSource, ...]:
         fmt = e.string("format", required=True, choices=IMU_FORMATS)
         throws = e.raw("throws", None)
         magnetometer = e.boolean("magnetometer", True)
+        barometer = e.boolean("barometer", False)
         e.finish()
         if not file.is_file():
             raise ConfigError(path, f"imu[{i}].file", f"file not found: {file}")
@@ -401,5 +404,5 @@ def _read_imu(path: Path, sec: Section) -> tuple[ImuSource, ...]:
                 raise ConfigError(path, f"imu[{i}].throws", "must be a list of [release_row, end_row] integer pairs "
                                   "(end after release, at least 10 rows)")
             throws = tuple((int(a), int(b)) for a, b in throws)
-        out.append(ImuSource(file=file, format=fmt, throws=throws, magnetometer=magnetometer))
+        out.append(ImuSource(file=file, format=fmt, throws=throws, magnetometer=magnetometer, barometer=barometer))
     return tuple(out)

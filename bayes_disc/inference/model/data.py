@@ -91,14 +91,14 @@ def build_problem(cfg: RunConfig, terms_override=None, flights=None, throws=None
         extra = [p.off_value for p in channels[0].parameters]
         t = by_name.pop(f.name, None)
         if t is not None:
-            channels.append(inertial_model(t, cfg.env.g))
+            channels.append(inertial_model(t, cfg.env))
             extra += list(own_start(channels[-1], t))
         records.append(f)
         observations.append(tuple(channels))
         own.append(np.array(extra, float))
     inertial_only = []
     for t in by_name.values():
-        model = inertial_model(t, cfg.env.g)
+        model = inertial_model(t, cfg.env)
         inertial_only.append(len(records))
         records.append(t.log)
         observations.append((model,))

@@ -15,8 +15,8 @@ def flight_info(problem) -> dict:
                 rec.update(samples=int(c.data.times.size), points=int(c.data.n_points),
                            t_start=float(c.data.times[0]), t_end=float(c.data.times[-1]))
             else:
-                rec.update(inertial_rows=int(len(c.row_offsets)), inertial_values=int(c.group_index.size),
-                           rows_since_release=int(c.row_offsets[-1]))
+                rec.update(inertial_rows=int(c.n_flight), inertial_values=int(c.group_index.size),
+                           rows_since_release=int(c.row_offsets[c.n_flight - 1]))
         out[f.name] = rec
     return out
 

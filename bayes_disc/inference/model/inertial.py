@@ -20,15 +20,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...observation.imu import estimate_timebase, find_throws, read_imu, throw_logs
+from ...observation.imu import estimate_timebase, find_throws, landing_log, read_imu, throw_logs
 from ...observation.imu.formats import ImuFileError, InertialLog
 from ...observation.models.inertial import InertialMeasurements
+from ...observation.models.magnetometer import MAG_OWN_PARAMETERS
 from ...physics import literature_coefficients
 
 log = logging.getLogger(__name__)
 
 #: nominal row period [s] when a log has no magnetometer to estimate it from (firmware loop 100 Hz)
 NOMINAL_PERIOD = 0.010
+#: time after a throw's impact whose barometer readings are used (the sensor's relaxation on the ground) [s]
+LANDING_SPAN = 1.5
 #: noise scales [rad/s, m/s²] weighting gyro against accelerometer misfit in the start search
 START_WEIGHTS = np.array([0.1, 0.1, 0.1, 1.0, 1.0, 1.0])
 
@@ -46,6 +49,8 @@ class InertialThrow:
     period_mag_gyro_sd: float | None = None
     repairs: list = field(default_factory=list)
     magnetometer: bool = True        # the source allows its magnetometer to be used (when the log has one)
+    barometer: bool = False          # the source asks for its barometer to be used (when the log has one)
+    landing: InertialLog | None = None   # rows right after the impact (the barometer's relaxation)
 
     @property
     def name(self) -> str:
@@ -75,13 +80,14 @@ def load_run_throws(cfg) -> list[InertialThrow]:
                 log.info("%s: repaired: %s", src.file.name, r)
             if rec.times is not None:          # imu-csv: each flight is a free flight from its first row
                 out.append(InertialThrow(rec, str(src.file), "ok", "timed log: whole flight", repairs=rec.repairs,
-                                         magnetometer=src.magnetometer))
+                                         magnetometer=src.magnetometer, barometer=src.barometer))
                 continue
             segments = find_throws(rec, override=list(src.throws) if src.throws else None)
             if not segments:
                 raise ImuFileError(src.file, None, "no throw found (|gyro| never exceeds the spin threshold); "
                                    "give the rows with imu[..].throws")
-            for seg, sub in zip(segments, throw_logs(rec, segments)):
+            starts = [s.start for s in segments[1:]] + [None]
+            for seg, sub, nxt in zip(segments, throw_logs(rec, segments), starts):
                 status, reason, tb = "ok", seg.reason, None
                 if rec.mag is not None:
                     try:
@@ -95,10 +101,11 @@ def load_run_throws(cfg) -> list[InertialThrow]:
                               "for a right-side-up disc; not fitted")
                 info = {"start_row": int(seg.start), "end_row": int(seg.end), "orientation": seg.orientation,
                         "reason": seg.reason}
-                out.append(InertialThrow(sub, str(src.file), status, reason, info,
-                                         None if tb is None else float(tb.mag_gyro.period),
+                period = None if tb is None else float(tb.mag_gyro.period)
+                landing = landing_log(rec, seg, int(LANDING_SPAN / (period or NOMINAL_PERIOD)), nxt)
+                out.append(InertialThrow(sub, str(src.file), status, reason, info, period,
                                          None if tb is None else float(tb.mag_gyro.sd), list(rec.repairs),
-                                         magnetometer=src.magnetometer))
+                                         magnetometer=src.magnetometer, barometer=src.barometer, landing=landing))
     names = [t.name for t in out]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
@@ -106,11 +113,26 @@ def load_run_throws(cfg) -> list[InertialThrow]:
     return out
 
 
-def inertial_model(throw: InertialThrow, g: float) -> InertialMeasurements:
+def inertial_model(throw: InertialThrow, env) -> InertialMeasurements:
     """The observation model of a throw (nominal period: the magnetometer/gyro estimate, else 10 ms); its
-    magnetometer is used when the log carries one and the source does not switch it off."""
-    return InertialMeasurements(throw.log, g, period=throw.period_mag_gyro or NOMINAL_PERIOD,
-                                magnetometer=throw.magnetometer and throw.log.mag is not None)
+    magnetometer and barometer are used when the log carries them and the source does not switch them off
+    (the barometer with the rows after the impact when the throw has them).
+
+    Parameters
+    ----------
+    throw : InertialThrow
+    env : Environment
+        The run's air density [kg/m³] and gravitational acceleration [m/s²].
+
+    Returns
+    -------
+    InertialMeasurements
+    """
+    barometer = throw.barometer and throw.log.pressure is not None
+    landing = throw.landing if barometer and throw.landing is not None and throw.landing.pressure is not None else None
+    return InertialMeasurements(throw.log, env.g, period=throw.period_mag_gyro or NOMINAL_PERIOD,
+                                magnetometer=throw.magnetometer and throw.log.mag is not None,
+                                barometer=barometer, rho=env.rho, landing=landing)
 
 
 def magnetometer_shared_start(models) -> dict:
@@ -160,9 +182,10 @@ def heading_start(problem, k: int, n: int = 72) -> float:
         cols = problem.channel_columns(k)[j]
         extra = np.repeat(theta[:, cols], n, axis=0)
         psi = 2 * np.pi * np.arange(n) / n
-        extra[:, -1] = psi                                   # mag_heading: the model's last own parameter
+        extra[:, len(c.shared_parameters) + c.parameters.index(MAG_OWN_PARAMETERS[0])] = psi
         pred = c.predict(replace(tr, states=np.repeat(tr.states, n, axis=0)), extra)
-        cost = np.nanmean((pred[:, c._seen[:, 6]][..., 6:] - c.measured[c._seen[:, 6], 6:][None]) ** 2, axis=(1, 2))
+        cost = np.nanmean((pred[:, c._seen[:, 6]][..., 6:9] - c.measured[c._seen[:, 6], 6:9][None]) ** 2,
+                          axis=(1, 2))
         return float(psi[int(np.nanargmin(cost))])
     return float("nan")
 

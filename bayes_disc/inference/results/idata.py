@@ -32,8 +32,11 @@ from ..sampling.chains import Chains
 from .draws import _walkers_as_chains, flight_entries, flight_variables, structured_samples
 
 
-#: the inertial channels, in the order of the models' predictions
-IMU_CHANNELS = ("gx", "gy", "gz", "ax", "ay", "az", "mx", "my", "mz")
+#: the inertial channels, in the order of the models' predictions (a throw may have a subset)
+IMU_CHANNELS = ("gx", "gy", "gz", "ax", "ay", "az", "mx", "my", "mz", "baro")
+#: the channel label of each inertial series name
+IMU_LABEL = {"gyro_x": "gx", "gyro_y": "gy", "gyro_z": "gz", "acc_x": "ax", "acc_y": "ay", "acc_z": "az",
+             "mag_x": "mx", "mag_y": "my", "mag_z": "mz", "baro": "baro"}
 #: most (chain × draw) samples in the ``log_likelihood`` group (float32; ~4000 draws × ~1300 points: ~21 MB)
 N_LOG_LIKELIHOOD_DRAWS = 4000
 #: most (chain × draw) samples in the ``posterior_predictive`` group (float32; demo: ~16 MB)
@@ -59,11 +62,19 @@ def _inertial_flights(problem: Problem) -> list[tuple[int, object]]:
     return [(k, c) for k, ch in enumerate(problem.channels) for c in ch if isinstance(c, InertialMeasurements)]
 
 
-def _pad_channels(x: np.ndarray, n: int) -> np.ndarray:
-    """x (..., c) with NaN channels appended up to n (a throw without the magnetometer among throws with it)."""
-    if x.shape[-1] >= n:
-        return x
-    return np.concatenate([x, np.full(x.shape[:-1] + (n - x.shape[-1],), np.nan)], axis=-1)
+def _place_channels(x: np.ndarray, names, used: list) -> np.ndarray:
+    """x (..., c) of series ``names`` spread over the run's channels ``used`` (labels), NaN where a throw has
+    none (a throw without the magnetometer or barometer among throws with them)."""
+    out = np.full(x.shape[:-1] + (len(used),), np.nan, dtype=x.dtype)
+    for j, name in enumerate(names):
+        out[..., used.index(IMU_LABEL[name])] = x[..., j]
+    return out
+
+
+def _used_channels(models) -> list:
+    """The channel labels any of the inertial ``models`` predicts, in :data:`IMU_CHANNELS` order."""
+    have = {IMU_LABEL[n] for c in models for n in c.series_names}
+    return [ch for ch in IMU_CHANNELS if ch in have]
 
 
 def observation_points(problem: Problem) -> dict:
@@ -100,7 +111,7 @@ def inertial_points(problem: Problem) -> dict:
         r, j = np.nonzero(c._seen)
         fl += [c.flight] * r.size
         rows.append(c.row_offsets[r].astype(int))
-        ch += [IMU_CHANNELS[i] for i in j]
+        ch += [IMU_LABEL[c.series_names[i]] for i in j]
     return {"imu_point_flight": np.array(fl, dtype=str), "imu_point_row": np.concatenate(rows),
             "imu_point_channel": np.array(ch, dtype=str)}
 
@@ -215,14 +226,14 @@ def build_inference_data(problem: Problem, chains: Chains, rng: np.random.Genera
         obs_dims[key] = [f"time_{f.name}", "marker", "axis"]
     if marker_flights:
         obs_coords.update(marker=[str(m) for m in problem.marker_ids], axis=["x", "y", "z"])
-    n_imu = max((len(c.series_names) for _, c in imu_flights), default=0)   # channels: NaN where a throw has fewer
+    used = _used_channels(c for _, c in imu_flights)          # channels: NaN where a throw has fewer
     for k, c in imu_flights:
         key = f"imu_{c.flight}"
-        observed[key] = _pad_channels(c.measured, n_imu)
+        observed[key] = _place_channels(c.measured, c.series_names, used)
         obs_coords[f"row_{c.flight}"] = c.row_offsets.astype(int)
         obs_dims[key] = [f"row_{c.flight}", "imu_channel"]
     if imu_flights:
-        obs_coords["imu_channel"] = list(IMU_CHANNELS[:n_imu])
+        obs_coords["imu_channel"] = used
     # thinned draws: pointwise log-likelihood and posterior predictive from one simulation
     ll_steps = _thinned_steps(n_chain, n_steps, n_log_likelihood)
     pp_steps = ll_steps[_thinned_steps(n_chain, ll_steps.size, n_predictive)]
@@ -249,7 +260,8 @@ def build_inference_data(problem: Problem, chains: Chains, rng: np.random.Genera
         g = problem.channel_groups(k)[problem.channels[k].index(c)]
         per_channel = np.array(c.series_groups)                             # noise group of gx … (mz)
         s = sg_pp[..., g][..., per_channel][:, :, None, :]
-        predictive[f"imu_{c.flight}"] = _pad_channels(m + s * rng.standard_normal(m.shape), n_imu).astype(np.float32)
+        predictive[f"imu_{c.flight}"] = _place_channels(m + s * rng.standard_normal(m.shape), c.series_names,
+                                                        used).astype(np.float32)
     ll_vars, ll_coords = {}, {"chain": np.arange(n_chain), "draw": ll_steps}
     if marker_flights:
         ll_vars["markers"] = (("chain", "draw", "point"), log_lik.reshape(n_chain, ll_steps.size, -1).astype(np.float32))

@@ -322,3 +322,26 @@ def throw_logs(log: InertialLog, segments: list[Segment]) -> list[InertialLog]:
         b = int(np.searchsorted(log.rows, seg.end))
         out.append(log.select(a, b, name=seg.name))
     return out
+
+
+def landing_log(log: InertialLog, segment: Segment, rows: int, next_start: int | None = None) -> InertialLog | None:
+    """The rows right after a throw's free flight (the disc on the ground), for the barometer's relaxation.
+
+    Parameters
+    ----------
+    log : InertialLog
+    segment : Segment
+    rows : int
+        How many logger rows after the flight's end to take at most.
+    next_start : int, optional
+        Release row of the log's next throw: the landing rows stop before it.
+
+    Returns
+    -------
+    InertialLog or None
+        Rows ``segment.end .. segment.end + rows - 1`` present in ``log`` (before ``next_start``), named like
+        the segment; None when there are none.
+    """
+    stop = segment.end + rows if next_start is None else min(segment.end + rows, next_start)
+    a, b = int(np.searchsorted(log.rows, segment.end)), int(np.searchsorted(log.rows, stop))
+    return log.select(a, b, name=segment.name) if b > a else None

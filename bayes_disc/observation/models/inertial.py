@@ -40,6 +40,15 @@ and wobble. The magnetometer adds its shared parameters (field strength, hard ir
 the per-throw field heading after the filter state, and two noise groups (``mag_axial``,
 ``mag_transverse``, µT) after the four above; without it the unit is exactly the gyro/accelerometer one.
 
+Barometer (``barometer=True``; :mod:`.barometer` for its equations, parameters and what it does not
+model): one more channel, the readings of a sensor that follows the outside pressure
+p_0 − ρ g (z(t) − z(0)) + c_q ½ ρ |v(t)|² with a first-order lag τ_b, on the rows that carry a new reading,
+on the same clock; with ``landing`` (the rows after the flight) also their readings, as the sensor relaxes
+on the ground. It measures the height of the flight, and with it the climb and the lift that the
+gyroscope and accelerometer leave loose. It adds its shared port coefficient and lag last among the
+shared parameters, the throw's p_0 and s_0 last among its own, one noise group (``baro``, Pa) last, and
+the landing rows after the flight's rows (NaN in every other channel).
+
 Residual series (diagnostics): measured − predicted gyro and accelerometer along the sensor axes
 (``gyro_x…z`` [rad/s], ``acc_x…z`` [m/s²]), each scaled by its noise group's σ (unit standard error 1),
 at the samples t_i of the parameter vector; the covariates (α, air speed, spin, height) are interpolated
@@ -57,6 +66,8 @@ from ...physics import TermParameter
 from ...physics.frames import quat_from_rotvec, quat_to_matrix
 from ..imu.formats import InertialLog
 from .base import ObservationModel, ResidualSeries
+from .barometer import (BARO_GROUPS, BARO_NOMINAL_NOISE, BARO_SERIES, BARO_SHARED_PARAMETERS, outside_pressure,
+                        own_parameters, reading_rows, relax)
 from .magnetometer import (MAG_GROUPS, MAG_NOMINAL_NOISE, MAG_OWN_PARAMETERS, MAG_SERIES, MAG_SHARED_PARAMETERS,
                            MAG_WINDOW, body_field, field_world, window_mean)
 
@@ -88,9 +99,9 @@ def low_pass(x, y0, tau, h):
 
     Parameters
     ----------
-    x : (B, J, 3) array
-        Filter input on the grid [unit].
-    y0 : (B, 3) array
+    x : (B, J, K) array
+        Filter input on the grid [unit], K channels.
+    y0 : (B, K) array
         State at the first grid point.
     tau : (B,) array
         Time constants [s] (> 0).
@@ -99,7 +110,7 @@ def low_pass(x, y0, tau, h):
 
     Returns
     -------
-    (B, J, 3) array
+    (B, J, K) array
         Filter output y_j = α y_{j−1} + (1 − α) x_{j−1} + (x_j − x_{j−1})(1 − τ(1 − α)/h), α = e^{−h/τ}.
     """
     B, J, _ = x.shape
@@ -107,7 +118,7 @@ def low_pass(x, y0, tau, h):
     for b in range(B):
         a = np.exp(-h / tau[b])
         k = 1.0 - tau[b] * (1.0 - a) / h
-        for c in range(3):
+        for c in range(x.shape[2]):
             y = y0[b, c]
             out[b, 0, c] = y
             for j in range(1, J):
@@ -244,6 +255,13 @@ class InertialMeasurements(ObservationModel):
         without time column).
     magnetometer : bool
         Also predict the log's magnetometer (``log.mag`` required) on the same clock.
+    barometer : bool
+        Also predict the log's barometer readings (``log.pressure`` required) on the same clock.
+    rho : float, optional
+        Air density [kg/m³] (required with the barometer).
+    landing : InertialLog, optional
+        The recording's rows right after the flight (the disc on the ground), for the barometer only: their
+        readings follow the sensor's relaxation to the landing height's pressure (:mod:`.barometer`).
     """
 
     id = "imu"
@@ -255,28 +273,40 @@ class InertialMeasurements(ObservationModel):
     g: float
     period: float
     magnetometer: bool = False
+    barometer: bool = False
+    rho: float | None = None
+    landing: InertialLog | None = None
     _obs: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
         if self.magnetometer and self.log.mag is None:
             raise ValueError(f"{self.log.name}: the magnetometer is asked for but the log has none")
+        if self.barometer and (self.log.pressure is None or not np.isfinite(self.log.pressure).any()):
+            raise ValueError(f"{self.log.name}: the barometer is asked for but the log has no pressure readings")
+        if self.barometer and not (self.rho is not None and self.rho > 0):
+            raise ValueError(f"{self.log.name}: the barometer needs the air density rho > 0, got {self.rho!r}")
         self.flight = self.log.name
         self.timed = self.log.times is not None
+        if self.landing is not None and (self.timed or not self.barometer):
+            raise ValueError(f"{self.log.name}: landing rows are used by the barometer of a log without time column "
+                             "only")
         rows = np.asarray(self.log.rows, float)
-        self.row_offsets = rows - rows[0]                         # (n,) rows since release
+        self.n_flight = rows.size
+        after = [] if self.landing is None else np.asarray(self.landing.rows, float)
+        self.row_offsets = np.r_[rows, after] - rows[0]           # (n,) rows since release, landing rows last
         self.h = self.period / OVERSAMPLE
         if self.timed:
             self.sample_times = np.asarray(self.log.times, float) - float(self.log.times[0])
             span = self.sample_times[-1]
         else:
-            span = self.row_offsets[-1] * self.period * PERIOD_SPAN
+            span = self.row_offsets[self.n_flight - 1] * self.period * PERIOD_SPAN
         n_grid = max(int(np.ceil(span / self.h)) + 3, 6)
         self.times = np.arange(n_grid) * self.h                   # simulation grid [s] from release
         data = self.measured
         self._seen = np.isfinite(data)
         if self.magnetometer:     # rows whose nominal window reaches before release: the hand's spin-up
             nominal = self.sample_times if self.timed else self.row_offsets * self.period
-            self._seen[nominal < MAG_WINDOW, 6:] = False
+            self._seen[nominal < MAG_WINDOW, 6:9] = False
         self._obs = data[self._seen]
         channel = np.broadcast_to(np.arange(data.shape[1]), data.shape)[self._seen]
         self._groups = np.array(self.series_groups)[channel].astype(np.intp)
@@ -284,24 +314,41 @@ class InertialMeasurements(ObservationModel):
     # -- channels ------------------------------------------------------------------------------------
     @property
     def measured(self) -> np.ndarray:
-        """(n, 6) gyro [rad/s] and accelerometer [m/s²], or (n, 9) with the magnetometer [µT] appended."""
+        """(n, 6) gyro [rad/s] and accelerometer [m/s²], then the magnetometer [µT] (3 columns) and the
+        barometer [Pa] (1 column, NaN on rows without a new reading) when they are used; the landing rows
+        last, with the barometer only."""
         parts = [self.log.gyro, self.log.acc] + ([self.log.mag] if self.magnetometer else [])
-        return np.concatenate(parts, axis=1)
+        flight = np.concatenate(parts, axis=1)
+        if not self.barometer:
+            return flight
+        p = np.r_[self.log.pressure, [] if self.landing is None else self.landing.pressure]
+        baro = np.full(p.size, np.nan)
+        new = reading_rows(p)
+        baro[new] = p[new]
+        flight = np.concatenate([flight, np.full((p.size - self.n_flight, flight.shape[1]), np.nan)])
+        return np.concatenate([flight, baro[:, None]], axis=1)
 
     @property
     def series_names(self) -> tuple[str, ...]:
         """Names of the predicted channels, in the order of :meth:`predict`'s last axis."""
-        return SERIES + (MAG_SERIES if self.magnetometer else ())
+        return SERIES + (MAG_SERIES if self.magnetometer else ()) + (BARO_SERIES if self.barometer else ())
 
     @property
     def series_groups(self) -> tuple[int, ...]:
         """Noise group of each channel of :attr:`series_names`."""
-        return SERIES_GROUPS + (MAG_SERIES_GROUPS if self.magnetometer else ())
+        out = SERIES_GROUPS + (MAG_SERIES_GROUPS if self.magnetometer else ())
+        return out + ((len(self.group_names) - 1,) if self.barometer else ())
+
+    @property
+    def group_names(self) -> tuple[str, ...]:
+        """The model's noise groups, in order."""
+        return GROUPS + (MAG_GROUPS if self.magnetometer else ()) + (BARO_GROUPS if self.barometer else ())
 
     # -- contract ------------------------------------------------------------------------------------
     @property
     def shared_parameters(self) -> tuple[TermParameter, ...]:
-        return SHARED_PARAMETERS + (MAG_SHARED_PARAMETERS if self.magnetometer else ())
+        return (SHARED_PARAMETERS + (MAG_SHARED_PARAMETERS if self.magnetometer else ())
+                + (BARO_SHARED_PARAMETERS if self.barometer else ()))
 
     @property
     def parameters(self) -> tuple[TermParameter, ...]:
@@ -312,11 +359,14 @@ class InertialMeasurements(ObservationModel):
                 for a in "xyz"]
         own += [TermParameter(f"lpf_state_{a}", "m/s²", f"accelerometer filter state at release along {a}",
                               0.0, 50.0) for a in "xyz"]
-        return tuple(own) + (MAG_OWN_PARAMETERS if self.magnetometer else ())
+        own += MAG_OWN_PARAMETERS if self.magnetometer else ()
+        if not self.barometer:
+            return tuple(own)
+        return tuple(own) + own_parameters(self.log.pressure[np.isfinite(self.log.pressure)][0])
 
     @property
     def noise_names(self) -> tuple[str, ...]:
-        return tuple(f"sigma_{g}_{self.flight}" for g in GROUPS + (MAG_GROUPS if self.magnetometer else ()))
+        return tuple(f"sigma_{g}_{self.flight}" for g in self.group_names)
 
     @property
     def group_index(self) -> np.ndarray:
@@ -324,22 +374,26 @@ class InertialMeasurements(ObservationModel):
 
     @property
     def noise_units(self) -> tuple[str, ...]:
-        return ("rad/s", "rad/s", "m/s²", "m/s²") + (("µT", "µT") if self.magnetometer else ())
+        return (("rad/s", "rad/s", "m/s²", "m/s²") + (("µT", "µT") if self.magnetometer else ())
+                + (("Pa",) if self.barometer else ()))
 
     @property
     def nominal_noise(self) -> np.ndarray:
         # rad/s (axial, transverse), m/s² (axial, transverse), µT (axial, transverse)
-        return np.array([0.02, 0.2, 0.3, 0.3] + (list(MAG_NOMINAL_NOISE) if self.magnetometer else []))
+        return np.array([0.02, 0.2, 0.3, 0.3] + (list(MAG_NOMINAL_NOISE) if self.magnetometer else [])
+                        + (list(BARO_NOMINAL_NOISE) if self.barometer else []))
 
     def sample_times_for(self, period: np.ndarray) -> np.ndarray:
-        """(B, n) sample times [s] since release for row periods (B,) (ignored for timed logs)."""
+        """(B, n) sample times [s] since release for row periods (B,) (ignored for timed logs); landing rows
+        last."""
         if self.timed:
             return np.broadcast_to(self.sample_times, (period.shape[0], self.sample_times.size))
         return period[:, None] * self.row_offsets[None, :]
 
     def split(self, extra: np.ndarray) -> dict:
         """Named parameter arrays (B, …) from the model's extra values (shared, then own); with the
-        magnetometer also ``field`` (B, 3) [µT] in world axes and ``hard_iron`` (B, 3) [µT]."""
+        magnetometer also ``field`` (B, 3) [µT] in world axes and ``hard_iron`` (B, 3) [µT]; with the
+        barometer ``baro_dynamic`` (B,) [–], ``baro_lag`` (B,) [s], ``baro_reference`` and ``baro_state`` (B,) [Pa]."""
         ns = len(self.shared_parameters)
         s = extra[:, :ns]
         own = extra[:, ns:]
@@ -350,12 +404,21 @@ class InertialMeasurements(ObservationModel):
         if self.magnetometer:
             out["field"] = field_world(s[:, 6], s[:, 7], own[:, j + 9])
             out["hard_iron"] = s[:, 8:11]
+        if self.barometer:
+            out["baro_dynamic"], out["baro_lag"] = s[:, ns - 2], s[:, ns - 1]
+            out["baro_reference"], out["baro_state"] = own[:, -2], own[:, -1]
         return out
 
+    def reading_times(self, t: np.ndarray) -> np.ndarray:
+        """(B, n) times [s] of the barometer readings shown on rows sampled at ``t`` (B, n): half a row
+        before each row (:mod:`.barometer`); the first row's at its own time."""
+        prev = np.concatenate([t[:, :1], t[:, :-1]], axis=1)
+        return 0.5 * (t + prev)
+
     def predict(self, trajectories, extra: np.ndarray | None) -> np.ndarray:
-        """(B, n, 6) predicted gyro [rad/s] and accelerometer [m/s²] at the log's samples, (B, n, 9) with
-        the magnetometer [µT]; NaN for a parameter vector whose samples fall beyond the simulated grid or
-        whose τ is not positive."""
+        """(B, n, c) predicted gyro [rad/s] and accelerometer [m/s²] at the log's samples, then the
+        magnetometer [µT] and the barometer [Pa] when used (:attr:`series_names`); NaN for a parameter
+        vector whose samples fall beyond the simulated grid or whose τ is not positive."""
         p = self.split(extra)
         states = np.ascontiguousarray(trajectories.states)
         C = sensor_rotation(p["tilt"])
@@ -363,7 +426,8 @@ class InertialMeasurements(ObservationModel):
         tau = np.where(p["tau"] > 0, p["tau"], np.nan)
         x[..., 3:] = low_pass(np.ascontiguousarray(x[..., 3:]), np.ascontiguousarray(p["y0"]),
                               np.nan_to_num(tau, nan=1.0), self.h)
-        t = np.ascontiguousarray(self.sample_times_for(p["period"]))
+        t_all = np.ascontiguousarray(self.sample_times_for(p["period"]))
+        t = np.ascontiguousarray(t_all[:, : self.n_flight])
         out = interpolate(x, self.h, t)
         out[..., :3] += p["b_g"][:, None, :]
         out[..., 3:] += p["b_a"][:, None, :]
@@ -372,7 +436,47 @@ class InertialMeasurements(ObservationModel):
             mag = np.einsum("bij,bnj->bni", C, mean) + p["hard_iron"][:, None, :]
             mag[np.isnan(out[..., 0])] = np.nan                 # samples beyond the grid
             out = np.concatenate([out, mag], axis=2)
+        if self.barometer:
+            out = np.concatenate([out, np.full((out.shape[0], t_all.shape[1] - self.n_flight, out.shape[2]), np.nan)],
+                                 axis=1)
+            baro = self.barometer_readings(states, p, t_all)
+            baro[:, : self.n_flight][np.isnan(out[:, : self.n_flight, 0])] = np.nan     # samples beyond the grid
+            out = np.concatenate([out, baro[..., None]], axis=2)
         out[~np.isfinite(tau)] = np.nan
+        return out
+
+    def barometer_readings(self, states: np.ndarray, p: dict, t: np.ndarray) -> np.ndarray:
+        """(B, n) predicted barometer readings [Pa] on every row sampled at ``t`` (B, n) [s] (:mod:`.barometer`):
+        the lagged outside pressure, integrated on the simulation grid, read half a row before each row; after
+        the flight's last row T the analytic relaxation to the pressure of the height at T (the disc on the
+        ground). NaN where the lag is not positive.
+
+        Parameters
+        ----------
+        states : (B, J, 13) array
+            Simulated states on the grid.
+        p : dict
+            :meth:`split` of the parameters.
+        t : (B, n) array
+            Row times since release [s], landing rows last.
+        """
+        lag = np.where(p["baro_lag"] > 0, p["baro_lag"], np.nan)
+        climb = states[..., 2] - states[:, :1, 2]
+        outside = outside_pressure(climb, np.linalg.norm(states[..., 3:6], axis=2), p["baro_reference"],
+                                   p["baro_dynamic"], self.rho, self.g)
+        sensor = low_pass(np.ascontiguousarray(outside[..., None]), np.ascontiguousarray(p["baro_state"][:, None]),
+                          np.nan_to_num(lag, nan=1.0), self.h)
+        read = self.reading_times(t)
+        out = interpolate(sensor, self.h, np.ascontiguousarray(read))[..., 0]
+        if self.landing is not None:
+            impact = t[:, self.n_flight - 1]                              # (B,) T: the last row in flight
+            at = interpolate(np.ascontiguousarray(np.stack([sensor[..., 0], climb], axis=2)), self.h,
+                             np.ascontiguousarray(impact[:, None]))[:, 0]
+            held = outside_pressure(at[:, 1:2], np.zeros((t.shape[0], 1)), p["baro_reference"], p["baro_dynamic"],
+                                    self.rho, self.g)[:, 0]
+            after = read >= impact[:, None]
+            out = np.where(after, relax(at[:, 0], held, np.maximum(read - impact[:, None], 0.0), lag), out)
+        out[~np.isfinite(lag)] = np.nan
         return out
 
     def residuals(self, prediction: np.ndarray) -> np.ndarray:
@@ -392,9 +496,10 @@ class InertialMeasurements(ObservationModel):
         cov = {"alpha": np.interp(t, grid, conditions.alpha[0]), "speed": np.interp(t, grid, conditions.speed[0]),
                "spin": np.interp(t, grid, st[:, 12]), "height": np.interp(t, grid, st[:, 2]), "time": t.copy()}
         names = self.series_names
-        units = SERIES_UNITS + (("µT",) * 3 if self.magnetometer else ())
+        units = SERIES_UNITS + (("µT",) * 3 if self.magnetometer else ()) + (("Pa",) if self.barometer else ())
         channels = (("gyro", "rad/s"), ("gyro", "rad/s"), ("acc", "m/s²"), ("acc", "m/s²"))
         channels += (("mag", "µT"), ("mag", "µT")) if self.magnetometer else ()
+        channels += (("baro", "Pa"),) if self.barometer else ()
         return ResidualSeries(times=t.copy(), series={n: diff[:, j] for j, n in enumerate(names)},
                               unit_se={n: np.ones(t.size) for n in names},
                               groups=dict(zip(names, self.series_groups)), units=dict(zip(names, units)),
