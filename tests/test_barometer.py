@@ -1,8 +1,9 @@
 """The barometer as a channel of the inertial unit (bayes_disc.observation.models.barometer): its readings are the
 rows where the pressure changes, its prediction matches the synthetic logger's independent computation (height,
 the port's share of the dynamic pressure, the sensor's lag, the relaxation on the ground after the flight), a
-wrong release speed, port coefficient or lag shows in its residuals, it narrows the lift and the release's climb that gyroscope and accelerometer leave loose, and switched
-off the unit is the one without it exactly."""
+wrong release speed, port coefficient or lag shows in its residuals, it narrows the lift and the release's climb
+that gyroscope and accelerometer leave loose, switched off the unit is the one without it exactly, and the shipped
+logs carry readings in flight and on the ground."""
 from dataclasses import replace
 
 import numpy as np

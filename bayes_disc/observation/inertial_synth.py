@@ -11,6 +11,10 @@ sensor axes, averaged over the window [t_i − 2 T_m, t_i] (here by the trapezoi
 the cumulative integral read linearly between its points; before release the disc is at its release
 attitude), plus the hard-iron offset h and Gaussian noise per axis group (none by default, so that the
 default logs draw the same random numbers for gyro and accelerometer as without it).
+
+The barometer (recorded throws only) follows the model of :mod:`.models.barometer`: the outside pressure of
+the height and the port's share of the dynamic pressure, followed with a first-order lag (stepped on the fine
+grid), read about every 0.1 s half a row before the row that shows it, plus Gaussian noise.
 """
 from __future__ import annotations
 
@@ -250,9 +254,9 @@ def _barometer(heights: np.ndarray, speeds: np.ndarray, spec: LoggerSpec, rng: n
     between rows on a grid ``SUBSTEPS`` times finer (the dynamic part only between rows in flight, so that
     it starts at the release row and stops at the last row in flight), and the sensor follows it with the
     first-order lag τ_b, stepped exactly for the mean of each fine step's end values (settled at the first
-    row's p_e: the disc rests before release). A reading is taken every ⌈T/P⌉ rows (T = :data:`BARO_TASK_PERIOD`), half a row before
-    the first row that shows it (read linearly on the fine grid), and held until the next, with Gaussian
-    noise of sd ``spec.baro_noise``.
+    row's p_e: the disc rests before release). A reading is taken every ⌈T/P⌉ rows
+    (T = :data:`BARO_TASK_PERIOD`), half a row before the first row that shows it (read linearly on the fine
+    grid), and held until the next, with Gaussian noise of sd ``spec.baro_noise``.
 
     Parameters
     ----------
@@ -274,7 +278,8 @@ def _barometer(heights: np.ndarray, speeds: np.ndarray, spec: LoggerSpec, rng: n
     flying = speeds > 0
     both = flying[np.floor(fine_t).astype(int)] & flying[np.ceil(fine_t).astype(int)]
     dynamic = np.where(both, np.interp(fine_t, rows, speeds ** 2), 0.0)
-    fine = PRESSURE_PA - env.rho * env.g * np.interp(fine_t, rows, heights) + spec.baro_dynamic * 0.5 * env.rho * dynamic
+    height = np.interp(fine_t, rows, heights)
+    fine = PRESSURE_PA - env.rho * env.g * height + spec.baro_dynamic * 0.5 * env.rho * dynamic
     decay = np.exp(-spec.period / SUBSTEPS / spec.baro_lag)
     sensor = np.empty_like(fine)
     sensor[0] = fine[0]

@@ -115,8 +115,8 @@ def load_run_throws(cfg) -> list[InertialThrow]:
 
 def inertial_model(throw: InertialThrow, env) -> InertialMeasurements:
     """The observation model of a throw (nominal period: the magnetometer/gyro estimate, else 10 ms); its
-    magnetometer and barometer are used when the log carries them and the source does not switch them off
-    (the barometer with the rows after the impact when the throw has them).
+    magnetometer is used when the log carries one and the source does not switch it off, its barometer when
+    the log carries one and the source asks for it (with the rows after the impact when the throw has them).
 
     Parameters
     ----------

@@ -14,4 +14,5 @@ from .timebase import (BaroCadence, PeriodEstimate, TimeBase, baro_cadence, esti
 
 __all__ = ["FORMATS", "G_STANDARD", "BaroCadence", "ImuFileError", "InertialLog", "PeriodEstimate", "Segment",
            "SegmentationSettings", "TimeBase", "baro_cadence", "estimate_timebase", "find_throws", "flight_names",
-           "landing_log", "period_from_mag_gyro", "read_flatball_ins", "read_imu", "read_imu_csv", "throw_logs", "write_imu_csv"]
+           "landing_log", "period_from_mag_gyro", "read_flatball_ins", "read_imu", "read_imu_csv", "throw_logs",
+           "write_imu_csv"]

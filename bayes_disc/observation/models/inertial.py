@@ -265,9 +265,10 @@ class InertialMeasurements(ObservationModel):
     """
 
     id = "imu"
-    title = "Inertial logger: gyroscope, low-pass-filtered accelerometer and magnetometer"
+    title = "Inertial logger: gyroscope, low-pass-filtered accelerometer, magnetometer and barometer"
     equations = ("ω_s = C ω_B + b_g;  τ dy/dt = C[Rᵀ(dv/dt + g ẑ) + ω̇_B × r_s + ω_B × (ω_B × r_s)] − y, "
-                 "a_s = y + b_a;  m_s = C ⟨Rᵀ⟩ B_w + h (window 2 T_m);  t_i = (row_i − row_0) P")
+                 "a_s = y + b_a;  m_s = C ⟨Rᵀ⟩ B_w + h (window 2 T_m);  "
+                 "τ_b dp_s/dt = p_0 − ρ g (z − z_0) + c_q ½ρ|v|² − p_s;  t_i = (row_i − row_0) P")
 
     log: InertialLog
     g: float
@@ -393,7 +394,8 @@ class InertialMeasurements(ObservationModel):
     def split(self, extra: np.ndarray) -> dict:
         """Named parameter arrays (B, …) from the model's extra values (shared, then own); with the
         magnetometer also ``field`` (B, 3) [µT] in world axes and ``hard_iron`` (B, 3) [µT]; with the
-        barometer ``baro_dynamic`` (B,) [–], ``baro_lag`` (B,) [s], ``baro_reference`` and ``baro_state`` (B,) [Pa]."""
+        barometer ``baro_dynamic`` (B,) [–], ``baro_lag`` (B,) [s], ``baro_reference`` and ``baro_state``
+        (B,) [Pa]."""
         ns = len(self.shared_parameters)
         s = extra[:, :ns]
         own = extra[:, ns:]
