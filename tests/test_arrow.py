@@ -142,7 +142,8 @@ def test_new_solver_matches_the_dense_optimum_and_covariance(small_problem):
     # its output: one marker RMS per flight, in mm, and every noise group with its unit
     out = ls.to_dict()
     assert out["rms_mm"] == {f.name: pytest.approx(1e3 * s) for f, s in zip(p.flights, ls.sigma)}
-    assert out["noise"] == {f"sigma_{f.name}": {"value": s, "unit": "m"} for f, s in zip(p.flights, ls.sigma)}
+    assert out["noise"] == {f"sigma_{f.name}": {"value": s, "unit": "m", "n": int(n)}
+                            for f, s, n in zip(p.flights, ls.sigma, p.n_coords)}
 
 
 def test_profile_fits_started_near_the_optimum_reach_it(small_problem, monkeypatch):

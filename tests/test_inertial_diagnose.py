@@ -10,7 +10,7 @@ from bayes_disc.diagnostics.missing_physics import (CANDIDATES, ModelFit, applic
 from bayes_disc.diagnostics.mismatch import onset_unavailable, term_signature
 from bayes_disc.diagnostics.residuals import peak_window
 from bayes_disc.inference.model.inertial import InertialThrow, level_start, own_start, search_starts
-from bayes_disc.inference.fitting.leastsq import LeastSquaresResult, fit_least_squares, noise_text
+from bayes_disc.inference.fitting.leastsq import LeastSquaresResult, fit_least_squares, noise_text, refine_least_squares
 from bayes_disc.inference.model.problem import Problem
 from bayes_disc.observation.inertial_synth import LoggerSpec, synthetic_log
 from bayes_disc.observation.models.inertial import SERIES, InertialMeasurements
@@ -196,3 +196,16 @@ def test_least_squares_output_reports_every_noise_group_in_its_own_unit():
         assert out["noise"][name] == {"value": s, "unit": "rad/s" if "gyro" in name else "m/s²"}
     text = noise_text(out["noise"])
     assert "mm" not in text and text.count("rad/s") == 2 * len(LAUNCHES) and text.count("m/s²") == 2 * len(LAUNCHES)
+
+
+def test_least_squares_noise_counts_are_the_residuals_behind_each_sigma():
+    """Each noise group's ``n`` in the least-squares output is the number of residuals its σ is the RMS of:
+    n σ² is the group's summed squared residuals at the optimum, so two fits of the same data compare by
+    Σ n ln(σ₁/σ₂)."""
+    p = builder(throws(0.0, seed=3))(())
+    ls = refine_least_squares(p, p.start_vector(), max_nfev=2, rounds=1)
+    noise = ls.to_dict()["noise"]
+    n = np.array([noise[name]["n"] for name in p.sigma_names])
+    sigma = np.array([noise[name]["value"] for name in p.sigma_names])
+    assert np.all(n > 0)
+    np.testing.assert_allclose(n * sigma ** 2, p.sum_squares(ls.theta[None])[0], rtol=1e-9)

@@ -27,6 +27,7 @@ from validation_common import (COEFFICIENTS, ROOT, binomial_band, familywise_mas
                                inside, load, outside_probability, table)
 from validation_fixed_truth import section_fixed_truth  # noqa: E402
 from validation_profile import section_profile_intervals  # noqa: E402
+from validation_wobble import section_real_wobble  # noqa: E402
 
 OUT = ROOT / "docs" / "validation.md"
 LEVELS = ("50", "90")
@@ -632,11 +633,12 @@ def build() -> str:
             "- [Profile intervals](#profile-intervals)",
             "- [Identifiability](#identifiability)",
             "- [Missing physics: blind tests](#missing-physics-blind-tests)",
+            "- [Real throws: the wobble terms](#real-throws-the-wobble-terms-runsflatballbarometer-runsflatballwobble)",
             "- [Real throws](#real-throws-runsflatball)",
             "- [Speed](#speed)", ""]
     body = (section_recovery() + section_calibration() + section_fixed_truth() + section_profile_intervals()
             + section_identifiability()
-            + section_missing_physics() + section_real() + section_speed())
+            + section_missing_physics() + section_real_wobble() + section_real() + section_speed())
     text = "\n".join(head + body).rstrip() + "\n"
     return text
 

@@ -36,10 +36,15 @@ class LeastSquaresResult:
     sigma_units: list            # (n_groups,) its unit ("m", "rad/s", "m/s²")
     start_flights: list = field(default_factory=list)   # flights the starts were fitted on (empty: all of them)
     lower_optima: list = field(default_factory=list)    # profile points below an earlier optimum it was refitted from
+    sigma_counts: list = field(default_factory=list)    # (n_groups,) residuals in every noise group (empty: not known)
 
     def noise(self) -> dict:
-        """{sigma name: {"value", "unit"}}: every noise group's residual RMS at the optimum."""
-        return {n: {"value": float(s), "unit": u} for n, s, u in zip(self.sigma_names, self.sigma, self.sigma_units)}
+        """{sigma name: {"value", "unit", "n"}}: every noise group's residual RMS at the optimum and its number
+        of residuals (``n`` only when ``sigma_counts`` is known). With ``n``, two fits of the same data compare
+        by their σ-profiled log-likelihood difference Σ_g n_g ln(σ_g,1/σ_g,2)."""
+        counts = self.sigma_counts or [None] * len(self.sigma_names)
+        return {n: {"value": float(s), "unit": u, **({"n": int(c)} if c is not None else {})}
+                for n, s, u, c in zip(self.sigma_names, self.sigma, self.sigma_units, counts)}
 
     def marker_rms_mm(self) -> dict:
         """{flight: RMS [mm]} of the marker noise groups (``sigma_<flight>``, unit m)."""
@@ -290,7 +295,8 @@ def refine_least_squares(problem: Problem, x0: np.ndarray, max_nfev: int = 200, 
     return LeastSquaresResult(theta=x, sigma=sigma, cov=cov, cost=cost, condition_number=J.information().condition_number(),
                               start_costs=[], nfev=int(nfev), message=res.message if res else "",
                               names=problem.names, flight_names=[f.name for f in problem.flights],
-                              sigma_names=list(problem.sigma_names), sigma_units=list(problem.noise_units))
+                              sigma_names=list(problem.sigma_names), sigma_units=list(problem.noise_units),
+                              sigma_counts=[int(n) for n in problem.n_coords])
 
 
 def refit_from_lower(problem: Problem, ls: LeastSquaresResult, x: np.ndarray, found: dict,
