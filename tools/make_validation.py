@@ -27,7 +27,7 @@ from validation_common import (COEFFICIENTS, ROOT, binomial_band, familywise_mas
                                inside, load, outside_probability, table)
 from validation_fixed_truth import section_fixed_truth  # noqa: E402
 from validation_profile import section_profile_intervals  # noqa: E402
-from validation_wobble import section_real_wobble  # noqa: E402
+from validation_wobble import real_wobble, section_real_wobble  # noqa: E402
 
 OUT = ROOT / "docs" / "validation.md"
 LEVELS = ("50", "90")
@@ -538,27 +538,6 @@ def real_time_base(summ: dict) -> list[str]:
               f"the estimate lies inside the 90 % interval for {sum(inside)} of {len(inside)}"
               + (" (every posterior sd is smaller than the estimate's own standard error, so the combined-sd "
                  "column is the fairer test)." if narrower else "."), ""]
-    return L
-
-
-def real_wobble(diag: dict) -> list[str]:
-    """The wobble (nutation) of data and model per throw from ``diagnosis.json`` → ``wobble``."""
-    wob = diag.get("wobble") or {}
-    if not wob:
-        return []
-    rows = []
-    for name, r in wob.items():
-        k_d, k_m = r["data"]["kappa"], r["model"]["kappa"]
-        d_d, d_m = r["data"]["decay_per_s"], r["model"]["decay_per_s"]
-        rows.append([name, " → ".join(fmt(k_d.get(s)) for s in ("early", "middle", "late")),
-                     " → ".join(fmt(k_m.get(s)) for s in ("early", "middle", "late")),
-                     f"{fmt(d_d.get('early'))} / {fmt(d_d.get('late'))}",
-                     f"{fmt(d_m.get('early'))} / {fmt(d_m.get('late'))}"])
-    L = ["", "Wobble (`diagnosis.json` → `wobble`): the transverse rates turn in the disc at κ × spin; κ and "
-             "the decay rate of the wobble's amplitude early (to 0.45 s) and late, in the data and in the fitted "
-             f"model (the torque-free rigid disc of the configured inertia: κ {fmt(next(iter(wob.values()))['torque_free_kappa'])}).", ""]
-    L += table(["throw", "κ data, early → middle → late", "κ model", "decay data, early / late [1/s]",
-                "decay model [1/s]"], rows)
     return L
 
 
