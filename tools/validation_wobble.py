@@ -1,7 +1,8 @@
 """The real throws' wobble section of docs/validation.md: the same throws fitted by least squares with the
 logger's barometer (runs/flatball/barometer/) and with the barometer and three wobble terms
 (runs/flatball/wobble/), compared group by group. Reads the two runs' least_squares.json and
-identifiability.json and the magnetometer's own row periods from runs/flatball/out/summary.json."""
+identifiability.json, the wobble run's diagnosis.json (its wobble and the further candidates) and the
+magnetometer's own row periods from runs/flatball/out/summary.json."""
 from __future__ import annotations
 
 import math
@@ -81,6 +82,13 @@ def section_real_wobble() -> list[str]:
               f"barometer alone, {fmt(pw['baro_lag']['value'])} s with the terms.", ""]
     L += table(["throw", "release speed, barometer [m/s]", "release speed, with the terms [m/s]",
                 "row period with the terms [ms]", "magnetometer's own period [ms]", "difference"], srow)
+    diag = load(f"{WOBBLE}/diagnosis.json")
+    L += real_wobble(diag)
+    cands = sorted(diag["candidates"], key=lambda c: -c["evidence"])
+    L += ["", f"Further terms on top of these (`diagnosis.json`, `diagnose --no-sample --no-learn`): verdict "
+              f"`{diag['verdict']}`, {len(diag['effects'])} accepted; "
+              + ", ".join(f"`{c['id']}` ΔBIC {c['evidence']:.0f} (share of the excess removed "
+                          f"{fmt(c.get('share_explained'))}, {c['status']})" for c in cands[:3]) + "."]
     gyro = [nw[f"sigma_gyro_transverse_{t}"]["value"] for t in throws]
     acc = [n for n in nw if n.startswith("sigma_acc")]
     worse = [n for n in acc if nw[n]["value"] > nb[n]["value"] * (1 + ACC_TOLERANCE)]
@@ -100,9 +108,11 @@ def section_real_wobble() -> list[str]:
               "and other optima of nearly the same misfit lie at other speeds "
               "([inertial recordings](inertial.md#measurement-model)). The aerodynamic coefficients of these fits "
               "are not findings.", "",
-          "Reproduce (each takes about ten minutes on two cores): `bayes-disc identifiability "
-          "runs/flatball/barometer/config.yaml --overwrite` and `bayes-disc identifiability "
-          "runs/flatball/wobble/config.yaml --overwrite` (`--overwrite` replaces the committed results).", ""]
+          "Reproduce (`identifiability` takes about ten minutes on two cores, `diagnose` "
+          f"{diag['wall_time_s'] / 60:.0f} min): `bayes-disc identifiability runs/flatball/barometer/config.yaml "
+          "--overwrite`, `bayes-disc identifiability runs/flatball/wobble/config.yaml --overwrite` and `bayes-disc "
+          "diagnose runs/flatball/wobble/config.yaml --no-sample --no-learn --overwrite` (`--overwrite` replaces "
+          "the committed results).", ""]
     return L
 
 
