@@ -108,8 +108,9 @@ def section_real_wobble() -> list[str]:
               "and other optima of nearly the same misfit lie at other speeds "
               "([inertial recordings](inertial.md#measurement-model)). The aerodynamic coefficients of these fits "
               "are not findings.", "",
-          "Reproduce (`identifiability` takes about ten minutes on two cores, `diagnose` "
-          f"{diag['wall_time_s'] / 60:.0f} min): `bayes-disc identifiability runs/flatball/barometer/config.yaml "
+          f"Reproduce (the committed runs took {load(f'{BASE}/identifiability.json')['wall_time_s'] / 60:.0f} and "
+          f"{id_w['wall_time_s'] / 60:.0f} min for `identifiability` and {diag['wall_time_s'] / 60:.0f} min for "
+          "`diagnose` on two shared cores): `bayes-disc identifiability runs/flatball/barometer/config.yaml "
           "--overwrite`, `bayes-disc identifiability runs/flatball/wobble/config.yaml --overwrite` and `bayes-disc "
           "diagnose runs/flatball/wobble/config.yaml --no-sample --no-learn --overwrite` (`--overwrite` replaces "
           "the committed results).", ""]
