@@ -22,10 +22,11 @@ GYRO_TARGET = 0.45
 ACC_TOLERANCE = 0.02
 
 
-def split_group(name: str) -> tuple[str, str]:
-    """('gyro_transverse', '2025-08-31-001-rb') from 'sigma_gyro_transverse_2025-08-31-001-rb'."""
-    group, throw = name[len("sigma_"):].split("_2025-", 1)
-    return group, "2025-" + throw
+def split_group(name: str, throws: list[str]) -> tuple[str, str]:
+    """('gyro_transverse', '2025-08-31-001-rb') from 'sigma_gyro_transverse_2025-08-31-001-rb', the throw one
+    of ``throws``."""
+    throw = next(t for t in throws if name.endswith("_" + t))
+    return name[len("sigma_"): -len(throw) - 1], throw
 
 
 def speed(params: dict, throw: str) -> float:
@@ -48,8 +49,8 @@ def section_real_wobble() -> list[str]:
     pb, pw = ls_b["parameters"], ls_w["parameters"]
     names = [p for ps in TERM_PARAMETERS.values() for p in ps]
     dl, dbic = evidence(nb, nw, len(names))
-    throws = sorted({split_group(n)[1] for n in nw})
-    groups = list(dict.fromkeys(split_group(n)[0] for n in nw))
+    throws = sorted(n[len("u1_"):] for n in pw if n.startswith("u1_"))
+    groups = list(dict.fromkeys(split_group(n, throws)[0] for n in nw))
     rows = []
     for g in groups:
         cells = []
@@ -97,7 +98,8 @@ def section_real_wobble() -> list[str]:
                 f"lower" if not worse else
                 f"**accelerometer groups worse by more than {100 * ACC_TOLERANCE:.0f} %: "
                 f"{len(worse)} of {len(acc)}** ("
-                + ", ".join(f"{split_group(n)[0]} of {split_group(n)[1][-6:]} {change[n]}" for n in worse)
+                + ", ".join(f"{split_group(n, throws)[0]} of {split_group(n, throws)[1][-6:]} {change[n]}"
+                            for n in worse)
                 + ")")
     L += ["", f"Verdict: the terms {'earn' if dbic > EVIDENCE_THRESHOLD else '**do not earn**'} their place "
               f"(ΔBIC {dbic:.0f}); the transverse gyro misfit is {fmt(min(gyro))}–{fmt(max(gyro))} rad/s, "
