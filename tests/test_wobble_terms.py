@@ -227,3 +227,29 @@ def test_disc_asymmetry_forces_a_wobble_at_twice_the_spin(c):
     assert abs(a - expected) < 0.01 * abs(expected)
     assert abs(b + a) < 0.01 * abs(a)                                         # W(0) = 0: the free part cancels it
     assert np.sqrt(np.mean(np.abs(W - basis @ [a, b]) ** 2)) < 0.02 * abs(a)
+
+
+@pytest.mark.parametrize("eps", [0.0, 0.03])
+def test_wobble_records_use_the_model_s_fitted_inertia_ratio(eps):
+    """The wobble diagnosis compares data and model with the model's own rigid disc: its torque-free κ and its
+    linear nutation are those of Ia (1 + ε_I) at the fitted ε_I, and the model's wobble turns at that κ."""
+    from test_inertial_diagnose import LAUNCHES, SPEC, builder, true_theta
+    from bayes_disc.diagnostics.wobble import rigid_kappa, rigid_nutation, wobble_records
+    from bayes_disc.observation.inertial_synth import synthetic_log
+    rng = np.random.default_rng(5)
+    logs = [synthetic_log(ls.name, ls.initial_state(), HUMMEL, ls.duration, SPEC, rng,
+                          terms=get_terms(["inertia_ratio"]), extension=np.array([eps])) for ls in LAUNCHES]
+    p = builder(logs)(("inertia_ratio",))
+    theta = true_theta(p, None)
+    theta[p.layout.index("eps_I")] = eps
+    disc = Disc()
+    records = wobble_records(p, theta)
+    assert set(records) == {ls.name for ls in LAUNCHES}
+    for rec in records.values():
+        assert rec["torque_free_kappa"] == pytest.approx(rigid_kappa(disc.Ia * (1 + eps), disc.Id, 1.0), abs=1e-12)
+        early = rec["model_rigid"]["early"]
+        qad = 0.5 * p.env.rho * early["speed_m_s"] ** 2 * disc.area * disc.diameter
+        kappa, _ = rigid_nutation(disc.Ia * (1 + eps), disc.Id, early["spin_rad_s"], -qad * HUMMEL.CMa,
+                                  qad * HUMMEL.CRp, qad * HUMMEL.CMq)
+        assert early["kappa"] == pytest.approx(kappa, abs=1e-12)
+        assert rec["model"]["kappa"]["early"] == pytest.approx(kappa, abs=0.03)

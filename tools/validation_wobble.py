@@ -130,9 +130,12 @@ def real_wobble(diag: dict) -> list[str]:
                      f"{fmt(d_d.get('early'))} / {fmt(d_d.get('late'))}",
                      f"{fmt(d_m.get('early'))} / {fmt(d_m.get('late'))}"])
     free = next(iter(wob.values()))["torque_free_kappa"]
+    fitted = "inertia_ratio" in diag.get("model", {}).get("base", [])
+    disc = ("the model's torque-free rigid disc, with its fitted inertia ratio" if fitted
+            else "the torque-free rigid disc of the configured inertia")
     L = ["", "Wobble (`diagnosis.json` → `wobble`): the transverse rates turn in the disc at κ × spin; κ and "
              "the decay rate of the wobble's amplitude early (to 0.45 s) and late, in the data and in the fitted "
-             f"model (the torque-free rigid disc of the configured inertia: κ {fmt(free)}).", ""]
+             f"model ({disc}: κ {fmt(free)}).", ""]
     L += table(["throw", "κ data, early → middle → late", "κ model", "decay data, early / late [1/s]",
                 "decay model [1/s]"], rows)
     return L

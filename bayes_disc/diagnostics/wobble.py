@@ -46,10 +46,12 @@ amplitude mismatch when the early nutation amplitudes differ by more than the fa
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.optimize import minimize_scalar
+
+from ..physics import axial_inertia
 
 __all__ = ["WobbleTrack", "decay_rate", "phasor_fit", "rigid_kappa", "rigid_nutation", "spin_phase", "throw_wobble",
            "wobble_summary", "wobble_track", "wobble_words"]
@@ -333,7 +335,8 @@ def throw_wobble(t: np.ndarray, measured: np.ndarray, predicted: np.ndarray, Ia:
     measured, predicted : (n, 3) arrays
         Gyro g_x, g_y, g_z in sensor axes [rad/s]: the log and the model at the fit.
     Ia, Id : float
-        The disc's moments of inertia [kg m²].
+        The model's moments of inertia [kg m²] (the axial one with a fitted inertia ratio:
+        :func:`bayes_disc.physics.axial_inertia`).
 
     Returns
     -------
@@ -412,7 +415,7 @@ def wobble_words(name: str, rec: dict) -> str:
     parts = []
     if "kappa" in mis:
         parts.append(f"{_kappa_text(d, 'the data’s wobble')}; {_kappa_text(m, 'the model’s')} "
-                     f"(torque-free rigid disc: κ {rec['torque_free_kappa']:.2f}{_rigid_text(rec)})")
+                     f"(the model's torque-free rigid disc: κ {rec['torque_free_kappa']:.2f}{_rigid_text(rec)})")
     if "decay_early" in mis:
         parts.append(f"{_decay_text('the data’s wobble', d['decay_per_s']['early'])} in the first {e0:.2f} s; "
                      f"{_decay_text('the model’s', m['decay_per_s']['early'])}")
@@ -468,10 +471,11 @@ def model_rigid(rec: dict, t: np.ndarray, speed: np.ndarray, coefficients: dict,
 
 def wobble_records(problem, theta: np.ndarray) -> dict:
     """{throw: :func:`throw_wobble` record} for every flight with an inertial channel, at θ (dim,); each
-    record also carries ``model_rigid`` (:func:`model_rigid`) and its ``words`` (:func:`wobble_words`)."""
+    record also carries ``model_rigid`` (:func:`model_rigid`) and its ``words`` (:func:`wobble_words`).
+    The rigid disc of both is the model's: its axial inertia includes a fitted inertia ratio."""
     out = {}
-    disc = problem.disc
     values = dict(zip(problem.names, np.asarray(theta, float)))
+    disc = replace(problem.disc, Ia=axial_inertia(problem.disc.Ia, values))
     for k, f in enumerate(problem.flights):
         got = inertial_gyro(problem, theta, k)
         if got is None:

@@ -5,11 +5,11 @@ from .constants import (COEFFICIENT_NAMES, COEFFICIENT_UNITS, HUMMEL2002, LITERA
                         Environment, LiteratureSet, literature_coefficients)
 from .equations import STATE_SIZE, marker_positions, state_derivative
 from .simulator import SimulatorSettings, Trajectories, simulate, simulate_reference
-from .terms import TERMS, Term, TermParameter, get_terms
+from .terms import TERMS, Term, TermParameter, axial_inertia, get_terms
 
 __all__ = [
     "COEFFICIENT_NAMES", "COEFFICIENT_UNITS", "HUMMEL2002", "LITERATURE", "POTTS_CROWTHER", "Coefficients", "Disc", "Environment",
     "LiteratureSet", "literature_coefficients", "STATE_SIZE", "marker_positions", "state_derivative",
     "SimulatorSettings", "Trajectories", "simulate", "simulate_reference", "TERMS", "Term", "TermParameter",
-    "get_terms", "FlightConditions", "flight_conditions",
+    "get_terms", "axial_inertia", "FlightConditions", "flight_conditions",
 ]
