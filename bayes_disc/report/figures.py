@@ -475,8 +475,9 @@ def learned_curve_figure(curve: dict, generating: np.ndarray | None = None, gene
 
 def wobble_figure(records: dict) -> Figure:
     """The wobble of each throw (one column per throw), data (dots) against model (line): κ, the nutation
-    rate over the spin [1], with the torque-free rigid disc's (Ia − Id)/Id dashed (top); the amplitudes of
-    the nutation (log scale), of the space-fixed part and of the sensor-fixed part [rad/s] (bottom).
+    rate over the spin [1], with the model's torque-free rigid disc's (Ia − Id)/Id dashed (Ia (1 + ε_I) with a
+    fitted inertia ratio) (top); the amplitudes of the nutation (log scale), of the space-fixed part and of the
+    sensor-fixed part [rad/s] (bottom).
 
     Parameters
     ----------
