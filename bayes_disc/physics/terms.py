@@ -351,7 +351,7 @@ of the real throws by itself (1.01 needs Ia/Id > 2: no rigid disc).""",
 
 def axial_inertia(Ia: float, values: dict) -> float:
     """The axial moment of inertia the model's wobble turns with: Ia (1 + ε_I) when the model carries
-    :data:`INERTIA_RATIO` (``values`` has ``eps_I``), else Ia.
+    :data:`INERTIA_RATIO` (``values`` has its ``eps_I``), else Ia.
 
     Parameters
     ----------
@@ -365,7 +365,7 @@ def axial_inertia(Ia: float, values: dict) -> float:
     float
         Ia (1 + ε_I) [kg m²].
     """
-    return Ia * (1.0 + float(values.get("eps_I", 0.0)))
+    return Ia * (1.0 + float(values.get(INERTIA_RATIO.parameters[0].name, 0.0)))
 
 
 # --- cross-coupled rate moments ------------------------------------------------------------------------
