@@ -77,3 +77,14 @@ def test_the_held_out_fit_keeps_the_better_of_its_two_starts(data):
     _, ok = problem.residuals(best[None], 0)
     assert ok[0]
     assert best[block] == pytest.approx(_fit_own(problem, free, 0, max_nfev=3)[0][block])
+
+
+def test_a_throw_the_run_cannot_fly_is_failed_with_the_simulator_s_reason(data):
+    d, truth = data
+    diverging = {n: 1.0 for n in COEFFICIENT_NAMES}
+    diverging.update({"CMq": 1e3, "CRp": -1e2})            # C_Mq, C_Rp ≈ +1 s/rad: the wobble grows
+    run = _summary(d / "diverging", truth, diverging)
+    assert main(["predict", str(d / "config.yaml"), "--from", str(run), "--output", str(d / "p_div")]) == 0
+    held = json.loads((d / "p_div" / "prediction.json").read_text())["flights"]["held"]
+    assert held["status"] == "failed" and held["channels"] == {}
+    assert held["reason"].endswith(": angular or aerodynamic rate above the integrator's rated envelope")

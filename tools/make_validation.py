@@ -24,7 +24,7 @@ from scipy import stats
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from validation_common import (COEFFICIENTS, ROOT, binomial_band, familywise_mass, fmt,  # noqa: E402
-                               inside, load, outside_probability, table)
+                               fold_names, inside, load, outside_probability, prediction_rows, table)
 from validation_fixed_truth import section_fixed_truth  # noqa: E402
 from validation_profile import section_profile_intervals  # noqa: E402
 from validation_wobble import real_wobble, section_real_wobble  # noqa: E402
@@ -283,7 +283,7 @@ def section_identifiability() -> list[str]:
     summ = load("runs/flatball/out/summary.json")
     ident = load("runs/flatball/out/identifiability.json")
     post = summ["parameters"]
-    folds = sorted(p.name for p in (ROOT / "runs/flatball/loo").iterdir() if p.is_dir())
+    folds = fold_names("runs/flatball/loo")
     fold_ls = {f: load(f"runs/flatball/loo/{f}/out_fit/least_squares.json")["parameters"] for f in folds}
     fold_id = {f: load(f"runs/flatball/loo/{f}/out_fit/identifiability.json") for f in folds}
     rows, far = [], []
@@ -460,15 +460,7 @@ def section_real() -> list[str]:
               "`noise_floor`; white noise passes through, a smooth model error does not).", ""]
     L += table(["group", "unit", "fitted σ", "noise floor", "ratio"], rows)
     # held-out prediction
-    prow = []
-    for f in sorted(p.name for p in (ROOT / "runs/flatball/loo").iterdir() if p.is_dir()):
-        pred = load(f"runs/flatball/loo/{f}/out_held/prediction.json")
-        for fl, rec in pred["flights"].items():
-            if rec["status"] != "ok":
-                prow.append([fl, "—", "—", "—", "—", f"{rec['status']}: {rec['reason']}"])
-            for ch, v in rec.get("channels", {}).items():
-                prow.append([fl, ch, v["unit"], fmt(v["rms_fixed"]), fmt(v["rms_free"]),
-                             f"{v['rms_fixed'] / v['rms_free']:.2f}"])
+    prow = prediction_rows("runs/flatball/loo")
     L += ["", "Held-out prediction (`bayes-disc predict`): each throw fitted with the coefficients and logger "
               "parameters of the other two throws' fit (fixed) and with everything free.", ""]
     L += table(["held-out throw", "channel", "unit", "RMS fixed", "RMS free", "fixed / free"], prow)

@@ -1,5 +1,5 @@
 """Helpers shared by the sections of docs/validation.md (tools/make_validation.py): reading the committed
-result files, number and table formatting, binomial bands. Needs numpy and scipy only."""
+result files, number and table formatting, binomial bands, held-out predictions. Needs numpy and scipy only."""
 from __future__ import annotations
 
 import json
@@ -55,3 +55,24 @@ def familywise_mass(k: int, mass: float = BAND_MASS) -> float:
 
 def inside(x: float, band) -> bool:
     return band[0] - 1e-12 <= x <= band[1] + 1e-12
+
+
+def fold_names(rel: str) -> list[str]:
+    """The leave-one-throw-out folds under ``rel`` (one folder per left-out throw), sorted."""
+    return sorted(p.name for p in (ROOT / rel).iterdir() if p.is_dir())
+
+
+def prediction_rows(rel: str) -> list[list[str]]:
+    """Rows (held-out throw, channel, unit, RMS fixed, RMS free, fixed / free) of every fold's
+    ``<rel>/<fold>/out_held/prediction.json`` (``bayes-disc predict``); a throw that was not fitted gives one row
+    with its status and reason."""
+    rows = []
+    for f in fold_names(rel):
+        pred = load(f"{rel}/{f}/out_held/prediction.json")
+        for fl, rec in pred["flights"].items():
+            if rec["status"] != "ok":
+                rows.append([fl, "—", "—", "—", "—", f"{rec['status']}: {rec['reason']}"])
+            for ch, v in rec.get("channels", {}).items():
+                rows.append([fl, ch, v["unit"], fmt(v["rms_fixed"]), fmt(v["rms_free"]),
+                             f"{v['rms_fixed'] / v['rms_free']:.2f}"])
+    return rows

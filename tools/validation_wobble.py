@@ -1,16 +1,22 @@
 """The real throws' wobble section of docs/validation.md: the same throws fitted by least squares with the
 logger's barometer (runs/flatball/barometer/) and with the barometer and three wobble terms
 (runs/flatball/wobble/), compared group by group. Reads the two runs' least_squares.json and
-identifiability.json, the wobble run's diagnosis.json (its wobble and the further candidates) and the
-magnetometer's own row periods from runs/flatball/out/summary.json."""
+identifiability.json, the wobble run's diagnosis.json (its wobble and the further candidates), its
+leave-one-throw-out folds (runs/flatball/wobble/loo/<throw>/: out_fit/least_squares.json, out_held/prediction.json)
+and the magnetometer's own row periods from runs/flatball/out/summary.json."""
 from __future__ import annotations
 
 import math
 
-from validation_common import fmt, load, table
+from validation_common import fmt, fold_names, load, prediction_rows, table
 
 BASE = "runs/flatball/barometer/out"
 WOBBLE = "runs/flatball/wobble/out"
+LOO = "runs/flatball/wobble/loo"
+#: the held-out RMS (coefficients fixed) a model should reach, as a multiple of a free fit's, in every fold
+LOO_TARGET = 1.3
+#: the coefficients and term parameters whose fold-to-fold spread the section shows
+FOLD_PARAMETERS = ("CLa", "CDa", "CMa", "eps_I", "Cw_amp")
 #: ΔBIC above which a model extension earns its place (the ``diagnose`` threshold, docs/missing-physics.md)
 EVIDENCE_THRESHOLD = 10.0
 #: the transverse gyro misfit every right-side-up throw should reach [rad/s]
@@ -87,6 +93,7 @@ def section_real_wobble() -> list[str]:
               f"`{diag['verdict']}`, {len(diag['effects'])} accepted; "
               + ", ".join(f"`{c['id']}` ΔBIC {c['evidence']:.0f} (share of the excess removed "
                           f"{fmt(c.get('share_explained'))}, {c['status']})" for c in cands[:3]) + "."]
+    L += held_out(pw, throws)
     gyro = [nw[f"sigma_gyro_transverse_{t}"]["value"] for t in throws]
     acc = [n for n in nw if n.startswith("sigma_acc")]
     worse = [n for n in acc if nw[n]["value"] > nb[n]["value"] * (1 + ACC_TOLERANCE)]
@@ -102,7 +109,7 @@ def section_real_wobble() -> list[str]:
               f"(ΔBIC {dbic:.0f}); the transverse gyro misfit is {fmt(min(gyro))}–{fmt(max(gyro))} rad/s, "
               + (f"within {GYRO_TARGET} rad/s on every throw" if max(gyro) <= GYRO_TARGET else
                  f"**above {GYRO_TARGET} rad/s on {sum(g > GYRO_TARGET for g in gyro)} of {len(gyro)} throws**")
-              + f"; {acc_text}. "
+              + f"; {acc_text}; {loo_verdict()}. "
               "The release speed is not settled by these fits: the start search of each run ends where it ends, "
               "and other optima of nearly the same misfit lie at other speeds "
               "([inertial recordings](inertial.md#measurement-model)). The aerodynamic coefficients of these fits "
@@ -111,9 +118,50 @@ def section_real_wobble() -> list[str]:
           f"{id_w['wall_time_s'] / 60:.0f} min for `identifiability` and {diag['wall_time_s'] / 60:.0f} min for "
           "`diagnose` on two shared cores): `bayes-disc identifiability runs/flatball/barometer/config.yaml "
           "--overwrite`, `bayes-disc identifiability runs/flatball/wobble/config.yaml --overwrite` and `bayes-disc "
-          "diagnose runs/flatball/wobble/config.yaml --no-sample --no-learn --overwrite` (`--overwrite` replaces "
-          "the committed results).", ""]
+          "diagnose runs/flatball/wobble/config.yaml --no-sample --no-learn --overwrite`; per fold `bayes-disc "
+          f"identifiability {LOO}/<throw>/fit.yaml --no-design --overwrite` then, in `{LOO}`, `bayes-disc predict "
+          "<throw>/held.yaml --from <throw>/out_fit --overwrite` (`--overwrite` replaces the committed results).",
+          ""]
     return L
+
+
+def held_out(params: dict, throws: list[str]) -> list[str]:
+    """The leave-one-throw-out folds of the wobble model: held-out RMS fixed and free, and each fold's release
+    speeds and :data:`FOLD_PARAMETERS` beside the all-throws fit's (``params``)."""
+    rows = []
+    for f in fold_names(LOO):
+        p = load(f"{LOO}/{f}/out_fit/least_squares.json")["parameters"]
+        fitted = sorted(n[len("u1_"):] for n in p if n.startswith("u1_"))
+        rows.append([f"without {f}", ", ".join(f"{speed(p, t):.1f}" for t in fitted),
+                     *(fmt(p[n]["value"]) for n in FOLD_PARAMETERS)])
+    rows.append(["all throws", ", ".join(f"{speed(params, t):.1f}" for t in throws),
+                 *(fmt(params[n]["value"]) for n in FOLD_PARAMETERS)])
+    L = ["", f"Held-out prediction with the terms (`{LOO}/`): each throw fitted with the coefficients, the terms' "
+             "and the logger's parameters of the other two throws' least-squares fit held (fixed) and with "
+             "everything free (`bayes-disc predict`).", ""]
+    L += table(["held-out throw", "channel", "unit", "RMS fixed", "RMS free", "fixed / free"], prediction_rows(LOO))
+    L += ["", "The folds' fits: release speeds of the throws each fits [m/s] and the parameters that move most.", ""]
+    L += table(["fit", "release speeds [m/s]", *FOLD_PARAMETERS], rows)
+    return L
+
+
+def loo_verdict() -> str:
+    """How many folds predict their held-out throw within :data:`LOO_TARGET` × a free fit on gyro and
+    accelerometer, and which could not be flown."""
+    met, failed, total = 0, [], 0
+    for f in fold_names(LOO):
+        for name, rec in load(f"{LOO}/{f}/out_held/prediction.json")["flights"].items():
+            total += 1
+            ch = rec.get("channels", {})
+            if rec["status"] != "ok":
+                failed.append(name[-6:])
+            elif all(ch[c]["rms_fixed"] <= LOO_TARGET * ch[c]["rms_free"] for c in ("gyro", "acc") if c in ch):
+                met += 1
+    text = (f"held out, {met} of {total} throws are predicted within {LOO_TARGET:g}× a free fit's RMS on gyro and "
+            "accelerometer")
+    if failed:
+        text += f" and {', '.join(failed)} cannot be flown with the other throws' parameters"
+    return text if met == total else f"**{text}**"
 
 
 def real_wobble(diag: dict) -> list[str]:

@@ -99,6 +99,13 @@ def fit_held_out(problem, theta: np.ndarray, free_theta: np.ndarray, k: int, max
     return x if np.isfinite(deviance) else None
 
 
+def simulation_failure(problem, theta: np.ndarray, k: int) -> str:
+    """Why flight k cannot be simulated at θ (dim,): the simulator's reason (``Trajectories.failure_reasons``),
+    or "" when it can."""
+    tr = problem.simulate(theta[None], k, want_states=False)
+    return "" if tr.ok[0] else tr.failure_reasons()[0]
+
+
 def run_predict(cfg: RunConfig, run_dir, output=None) -> dict:
     """Held-out validation (module docstring); writes ``<output>/prediction.json``.
 
@@ -144,9 +151,12 @@ def run_predict(cfg: RunConfig, run_dir, output=None) -> dict:
     for k, f in enumerate(problem.flights):
         fixed = fit_held_out(problem, theta, free.theta, k, cfg.least_squares.max_nfev)
         if fixed is None:
+            at_free = theta.copy()
+            at_free[problem.layout.flight_slice(k)] = free.theta[problem.layout.flight_slice(k)]
             flights[f.name] = {"status": "failed", "channels": {},
                                "reason": "with the run's coefficients and shared parameters the throw could not "
-                                         "be simulated from either start (the problem's and the free fit's)"}
+                                         "be simulated from either start (the problem's and the free fit's): "
+                                         + simulation_failure(problem, at_free, k)}
             log.warning("%s: %s", f.name, flights[f.name]["reason"])
             continue
         rf, rr = channel_rms(problem, fixed, k), channel_rms(problem, free.theta, k)
