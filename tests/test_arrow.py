@@ -214,6 +214,16 @@ def test_held_parameters_stay_put(small_problem):
     assert res.cost < 0.5 * np.sum(whitened_residuals(x0, p, p.nominal_noise) ** 2)
 
 
+def test_holding_every_shared_parameter_fits_the_flights_alone(small_problem):
+    p = small_problem
+    free = np.zeros(p.dim, bool)
+    free[p.ic_start:] = True                                   # each flight's own block; no shared unknowns
+    x0 = p.start_vector()
+    ls = refine_least_squares(p, x0, max_nfev=20, rounds=1, free=free)
+    assert np.array_equal(ls.theta[: p.ic_start], x0[: p.ic_start])
+    assert np.all(ls.cov[: p.ic_start] == 0.0) and np.all(np.diag(ls.cov)[p.ic_start:] > 0)
+
+
 class _SharpProblem:
     """The parts of a Problem that jacobian_blocks reads, for two flights whose residuals
     r_k,j = sin(ω θ_0 t_j) + θ_(1+k) t_j² (θ_0 shared, θ_(1+k) flight k's own) have a known Jacobian; ω sets how

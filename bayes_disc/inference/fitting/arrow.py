@@ -182,7 +182,10 @@ def _cholesky(M: np.ndarray):
 
 
 def _pinv_sym(M: np.ndarray) -> np.ndarray:
-    """Pseudo-inverse of a symmetric matrix (eigenvalues below 1e-15 of the largest dropped)."""
+    """Pseudo-inverse of a symmetric matrix (eigenvalues below 1e-15 of the largest dropped; a 0 × 0 matrix,
+    when every shared parameter is held, is its own)."""
+    if M.size == 0:
+        return M.copy()
     w, V = np.linalg.eigh(0.5 * (M + M.T))
     keep = w > 1e-15 * max(w[-1], 1e-300)
     return (V[:, keep] / w[keep]) @ V[:, keep].T
