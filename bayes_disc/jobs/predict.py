@@ -87,14 +87,19 @@ def _fit_own(problem, theta: np.ndarray, k: int, max_nfev: int) -> tuple[np.ndar
     return x, float(deviance)
 
 
+def with_free_block(problem, theta: np.ndarray, free_theta: np.ndarray, k: int) -> np.ndarray:
+    """θ (dim,) with flight k's block taken from the free fit's θ (dim,): the held-out fit's second start."""
+    block = problem.layout.flight_slice(k)
+    out = theta.copy()
+    out[block] = free_theta[block]
+    return out
+
+
 def fit_held_out(problem, theta: np.ndarray, free_theta: np.ndarray, k: int, max_nfev: int):
     """Flight k's own block fitted with the shared entries of θ held, from two starts: the problem's own start
     for the flight and the flight's block of the free fit (the wobble phase makes the fit multimodal). Returns
     the better fit's θ (dim,), or None when neither can be simulated."""
-    block = problem.layout.flight_slice(k)
-    from_free = theta.copy()
-    from_free[block] = free_theta[block]
-    fits = [_fit_own(problem, start, k, max_nfev) for start in (theta, from_free)]
+    fits = [_fit_own(problem, start, k, max_nfev) for start in (theta, with_free_block(problem, theta, free_theta, k))]
     x, deviance = min(fits, key=lambda f: f[1])
     return x if np.isfinite(deviance) else None
 
@@ -151,8 +156,7 @@ def run_predict(cfg: RunConfig, run_dir, output=None) -> dict:
     for k, f in enumerate(problem.flights):
         fixed = fit_held_out(problem, theta, free.theta, k, cfg.least_squares.max_nfev)
         if fixed is None:
-            at_free = theta.copy()
-            at_free[problem.layout.flight_slice(k)] = free.theta[problem.layout.flight_slice(k)]
+            at_free = with_free_block(problem, theta, free.theta, k)
             flights[f.name] = {"status": "failed", "channels": {},
                                "reason": "with the run's coefficients and shared parameters the throw could not "
                                          "be simulated from either start (the problem's and the free fit's): "
