@@ -297,6 +297,19 @@ def test_verdict_lines_from_their_files():
     assert "ESS 120 (needed 400)" in v.text and "472000 samples" in v.text
     v = convergence_verdict(conv | {"converged": True, "total_steps": 750}, {})
     assert v.status == "ok" and v.text.startswith("converged after 750 steps")
+    # moves whose proposals do not fit the posterior are named when the run did not converge
+    moves = {"independence jump": {"share": 0.28, "proposals": 100000, "acceptance": 0.0004},
+             "ridge carry": {"share": 0.28, "proposals": 100000, "acceptance": 0.2},
+             "DE snooker": {"share": 0.02, "proposals": 8000, "acceptance": 0.001}}
+    v = convergence_verdict(conv | {"moves": moves}, {"max_steps": 3000})
+    assert "(independence jump accepted less than 1% of the time" in v.text and "snooker" not in v.text
+    v = convergence_verdict(conv | {"moves": moves, "converged": True}, {})
+    assert "accepted less than" not in v.text
+    from bayes_disc.report.content import _moves_table
+    html = _moves_table({"moves": moves})
+    assert "<td>independence jump</td><td>0.28</td><td>100000</td><td>0.0 %</td>" in html
+    assert "<b>independence jump</b> accepted less than 1%" in html
+    assert _moves_table({}) == "" and "accepted less than" not in _moves_table({"moves": {"DE snooker": moves["DE snooker"]}})
     coefs = ["CL0", "CLa", "CD0"]
     data = {"coefficients": {"CL0": {"verdict": "identified"}, "CLa": {"verdict": "weak"},
                              "CD0": {"verdict": "unidentified"}}}

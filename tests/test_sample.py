@@ -64,6 +64,26 @@ def test_same_seed_same_summary_and_outputs(tmp_path):
     assert a["parameters"]["sigma_short"]["ess_tail"] == pytest.approx(row["ess_tail"], rel=1e-9)
     loo = az.loo(idata)
     assert loo.n_data_points == a["flights"]["short"]["points"] and np.isfinite(loo.elpd_loo)
+    _check_move_counts(a, runs[0], since=30)
+
+
+def _check_move_counts(summary: dict, out: Path, since: int):
+    """convergence.moves counts every walker's proposal after the last warm-up adaptation (step ``since``) once,
+    and its acceptances are the walkers' moves in the chain files over those steps."""
+    import emcee
+    conv = summary["convergence"]
+    moves = conv["moves"]
+    assert {"independence jump", "DE, γ × 0.35", "DE snooker"} <= set(moves)
+    assert sum(m["share"] for m in moves.values()) == pytest.approx(1.0, abs=1e-3)
+    steps = conv["total_steps"] - since
+    assert sum(m["proposals"] for m in moves.values()) == steps * conv["walkers_per_ensemble"] * conv["ensembles"]
+    moved = 0
+    for e in range(conv["ensembles"]):
+        chain = emcee.backends.HDFBackend(str(out / f"chains/ensemble_{e}.h5"), read_only=True).get_chain()
+        moved += int(np.any(chain[since + 1:] != chain[since:-1], axis=-1).sum())
+        moved += int(np.any(chain[since] != chain[since - 1], axis=-1).sum())
+    accepted = sum(round(m["acceptance"] * m["proposals"]) for m in moves.values() if m["proposals"])
+    assert accepted == moved > 0
 
 
 def test_resume_continues_without_losing_samples(tmp_path):
@@ -77,6 +97,8 @@ def test_resume_continues_without_losing_samples(tmp_path):
     second = emcee.backends.HDFBackend(str(tmp_path / "out/chains/ensemble_0.h5"), read_only=True).get_chain()
     assert second.shape[0] == 75
     np.testing.assert_array_equal(second[:45], first)
+    # the moves' counts go on from the interrupted run's last check: every step after the warm-up, once
+    _check_move_counts(json.loads((tmp_path / "out/summary.json").read_text()), tmp_path / "out", since=30)
 
 
 # ---------------------------------------------------------------------------------------------- slow

@@ -504,3 +504,27 @@ def test_scaled_cholesky_factors_directly_where_the_floor_cannot_bind(monkeypatc
     L = scaled_cholesky(low)
     np.testing.assert_allclose(L @ L.T / np.outer(d, d), floored, atol=1e-9)
     assert np.linalg.eigvalsh(L @ L.T / np.outer(d, d)).min() > 0.5 * EIGENVALUE_FLOOR * w.max()
+
+
+def test_counted_move_counts_without_changing_the_chain():
+    """A counted DE move gives the same chain as the move alone (it draws nothing of its own), counts one
+    proposal per walker and step, and its acceptances are emcee's; a wrong count would break either check."""
+    from bayes_disc.inference.sampling.mixing import CountedMove, add_counts, move_counts
+
+    def log_prob(x):
+        return -0.5 * np.sum(x * x / np.arange(1, 4), axis=-1)
+
+    p0 = np.random.default_rng(1).standard_normal((12, 3))
+    chains, counted = [], None
+    for wrap in (False, True):
+        move = emcee.moves.DEMove()
+        if wrap:
+            move = counted = CountedMove(move, "DE")
+        sampler = emcee.EnsembleSampler(12, 3, log_prob, vectorize=True, moves=[(move, 1.0)])
+        sampler.random_state = np.random.RandomState(7).get_state()
+        sampler.run_mcmc(p0, 40, progress=False)
+        chains.append(sampler.get_chain())
+    np.testing.assert_array_equal(chains[0], chains[1])
+    assert counted.proposed == 40 * 12 and counted.accepted == int(sampler.backend.accepted.sum()) > 0
+    counts = move_counts([(counted, 1.0)])
+    assert add_counts(counts, counts) == {"DE": [1.0, 2 * 480, 2 * counted.accepted]}

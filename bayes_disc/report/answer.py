@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ..inference.fitting.joint_region import p_text
+from ..inference.results.summary import STALLED_ACCEPTANCE, stalled_moves
 from .sections import Raw, Section, esc, fmt, fmt_count, fmt_estimate, fmt_percent, fmt_scaled, table
 
 LIT_LABELS = {"potts_crowther": "Potts & Crowther 2000", "hummel2002": "Hummel & Hubbard 2002 (Table 2)"}
@@ -73,6 +74,10 @@ def convergence_verdict(convergence: dict, settings: dict | None = None) -> Verd
         head = f"NOT converged: step cap of {cap} reached"
     else:
         head = f"NOT converged ({convergence.get('reason', 'stopped early')})"
+    stalled = stalled_moves(convergence.get("moves") or {})
+    if not ok and stalled:
+        head += (f" ({' and '.join(stalled)} accepted less than {STALLED_ACCEPTANCE:.0%} of the time: the posterior "
+                 "is not the shape their proposals assume, and the walkers moved by local steps alone)")
     samples = ""
     if all(k in convergence for k in ("kept_steps", "walkers_per_ensemble", "ensembles")):
         n = convergence["kept_steps"] * convergence["walkers_per_ensemble"] * convergence["ensembles"]

@@ -9,6 +9,7 @@ import numpy as np
 
 from ..inference.model.layout import IC_NAMES as IC_ORDER
 from ..inference.fitting.leastsq import noise_text
+from ..inference.results.summary import STALLED_ACCEPTANCE, stalled_moves
 from ..inference.results.versions import software_versions
 from . import figures as F
 from .answer import LIT_LABELS, compare
@@ -287,6 +288,23 @@ def _trace_bands(ctx, names):
     return bands, thin
 
 
+def _moves_table(conv: dict) -> str:
+    """The sampler's moves after the warm-up: share of the proposals, proposals and acceptance; a sentence
+    when some have stalled (:func:`stalled_moves`). Empty for runs that do not record them."""
+    moves = conv.get("moves") or {}
+    if not moves:
+        return ""
+    rows = [[label, fmt(m["share"], 2), fmt_count(m["proposals"]),
+             "–" if m["acceptance"] is None else f"{100 * m['acceptance']:.1f} %"] for label, m in moves.items()]
+    stalled = stalled_moves(moves)
+    note = (f"<p><b>{esc(' and '.join(stalled))}</b> accepted less than {STALLED_ACCEPTANCE:.0%} of the time: "
+            "these proposals (an approximation of the posterior drawn from afresh) do not fit it — typically a "
+            "curved or very thin ridge — so the walkers moved by the local moves alone, and the autocorrelation "
+            "times are long.</p>" if stalled else "")
+    return ("<h3>Moves after the warm-up</h3>" + table(["move", "share", "proposals", "accepted"], rows, "num")
+            + note)
+
+
 def convergence_section(ctx) -> Section:
     s = ctx.summary
     conv = s["convergence"]
@@ -335,7 +353,7 @@ def convergence_section(ctx) -> Section:
     state = "Converged" if conv["converged"] else "<b>Not converged</b>"
     why = "" if str(conv["reason"]).strip().lower() == "converged" else f": {esc(conv['reason'])}"
     html = (f"<p>{state}{why}. {crit}</p>"
-            + table(heads, [row(n) for n in main_names], "num")
+            + table(heads, [row(n) for n in main_names], "num") + _moves_table(conv)
             + f"<details><summary>Initial conditions ({len(ic_names)} parameters)</summary>"
             + table(heads, [row(n) for n in ic_names], "num") + "</details>")
     return Section("convergence", "Convergence",

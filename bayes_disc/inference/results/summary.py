@@ -85,6 +85,28 @@ def literature_table() -> dict:
     return {k: dict(s.values) for k, s in LITERATURE.items()}
 
 
+def move_records(counts: dict) -> dict:
+    """summary.json's ``convergence.moves``: every move's share of the proposals, its proposals (one per walker)
+    and the share of them accepted, after the warm-up; from {label: [share, proposed, accepted]}."""
+    return {label: {"share": round(float(share), 4), "proposals": int(n),
+                    "acceptance": float(a / n) if n else None}
+            for label, (share, n, a) in counts.items()}
+
+
+#: a move accepted less often than this after the warm-up has stalled: its proposals do not fit the posterior
+STALLED_ACCEPTANCE = 0.01
+#: ... counted when it has at least this share of the proposals
+STALLED_SHARE = 0.05
+
+
+def stalled_moves(moves: dict) -> list[str]:
+    """The moves of ``convergence.moves`` (:func:`move_records`) with a share of at least
+    :data:`STALLED_SHARE` accepted less than :data:`STALLED_ACCEPTANCE` of the time: their proposals (a
+    Gaussian or ridge approximation of the posterior) do not fit it, and the walkers moved by the others."""
+    return [label for label, m in moves.items() if m["share"] >= STALLED_SHARE and m["proposals"]
+            and m["acceptance"] is not None and m["acceptance"] < STALLED_ACCEPTANCE]
+
+
 def build_summary(problem: Problem, chains: Chains, idata, ls_dict: dict, cfg_info: dict, threads: int = 1) -> dict:
     """summary.json (docs/outputs.md) of a run: parameter records (:func:`summarize`, in ``threads`` threads),
     convergence, literature."""
@@ -109,6 +131,7 @@ def build_summary(problem: Problem, chains: Chains, idata, ls_dict: dict, cfg_in
                                 "r_hat_walkers: the same statistic with every walker as a chain (az.summary)",
             "ess_bulk_min_coefficient": float(min(params[c]["ess_bulk"] for c in coef)),
             "acceptance_mean": float(np.mean(chains.acceptance)),
+            "moves": move_records(chains.moves),
         },
         "least_squares": ls_dict,
         **cfg_info,

@@ -30,6 +30,7 @@ class Chains:
     history: list = field(default_factory=list)
     wall_time_s: float = 0.0
     ss: np.ndarray | None = None
+    moves: dict = field(default_factory=dict)   # {label: [share, proposed, accepted]} since the warm-up
 
 
 class StoredChains:

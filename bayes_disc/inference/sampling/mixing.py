@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import emcee
 import numpy as np
+from emcee.moves.move import Move
 
 from ..model.config import SamplerSettings
 from ..model.problem import Problem
@@ -49,6 +50,43 @@ BLOCK_MIX = (("gibbs", 0.6), ("shift", 0.4))
 RIDGE_BLOCK_MIX = (("refresh", 0.7), ("gibbs", 0.3))
 
 
+class CountedMove(Move):
+    """A move that counts its proposals and acceptances, one per walker it proposes for, and otherwise does
+    exactly what ``move`` does (it draws no random numbers of its own).
+
+    Parameters
+    ----------
+    move : emcee.moves.Move
+        The move counted.
+    label : str
+        Its name in the run's records (``summary.json`` → ``convergence.moves``).
+    """
+
+    def __init__(self, move: Move, label: str):
+        self.move, self.label = move, label
+        self.proposed = self.accepted = 0
+
+    def propose(self, model, state):
+        new, accepted = self.move.propose(model, state)
+        self.proposed += int(np.size(accepted))
+        self.accepted += int(np.sum(accepted))
+        return new, accepted
+
+
+def move_counts(moves) -> dict:
+    """{label: [share, proposed, accepted]} of a list of (:class:`CountedMove`, share)."""
+    return {m.label: [w, m.proposed, m.accepted] for m, w in moves}
+
+
+def add_counts(total: dict, counts: dict) -> dict:
+    """``total`` plus ``counts`` ({label: [share, proposed, accepted]}), as a new dict."""
+    out = {k: list(v) for k, v in total.items()}
+    for label, (share, proposed, accepted) in counts.items():
+        old = out.get(label, [share, 0, 0])
+        out[label] = [share, old[1] + proposed, old[2] + accepted]
+    return out
+
+
 def uses_block_moves(block_fraction: float, walkers: int, dim: int) -> bool:
     """Whether the ensembles get block moves: when they are enabled (``block_fraction`` > 0) and the walkers
     are fewer than 2·dim + 2, too few for the DE moves to span every direction. With enough walkers the
@@ -61,9 +99,9 @@ def _moves(problem: Problem, proposal: Proposal, independence: CompositeProposal
            block_fraction: float = 0.0, walkers: int | None = None):
     """emcee's (move, weight) list: a ``block_fraction`` share of block moves (when :func:`uses_block_moves`;
     ``walkers`` None: whenever enabled), then of the rest a ``fraction`` share of Metropolis–Hastings moves
-    (independence jumps) and DE moves. With fewer than 2·dim ``walkers`` (block moves on), the DE moves
-    propose within the walkers' span only: still exact, so emcee's guard against them is lifted
-    (``live_dangerously``)."""
+    (independence jumps) and DE moves, each a :class:`CountedMove` named for what it does. With fewer than
+    2·dim ``walkers`` (block moves on), the DE moves propose within the walkers' span only: still exact, so
+    emcee's guard against them is lifted (``live_dangerously``)."""
     dangerous = walkers is not None and walkers < 2 * problem.dim
     if walkers is not None and not uses_block_moves(block_fraction, walkers, problem.dim):
         block_fraction = 0.0
@@ -75,24 +113,25 @@ def _moves(problem: Problem, proposal: Proposal, independence: CompositeProposal
         conditional, shared, regression = block_factors(problem, proposal.cov)
         for kind, share in (RIDGE_BLOCK_MIX if ridges else BLOCK_MIX):
             if kind == "gibbs":
-                move = FlightBlockMove(problem, conditional)
+                move = CountedMove(FlightBlockMove(problem, conditional), "flight sweep, random walk")
             elif kind == "refresh":
-                move = RidgeFlightRefresh(problem, ridge_parts, ridge_weights)
+                move = CountedMove(RidgeFlightRefresh(problem, ridge_parts, ridge_weights), "flight sweep, ridge refresh")
             else:
-                move = emcee.moves.MHMove(SharedShift(shared, regression))
+                move = CountedMove(emcee.moves.MHMove(SharedShift(shared, regression)), "shared shift")
             moves.append((move, block_fraction * share))
     rest = 1.0 - block_fraction
     if fraction > 0:
         carry = CARRY_SHARE if ridges else 0.0
-        moves.append((IndependenceJump(independence), rest * fraction * (1 - carry)))
+        moves.append((CountedMove(IndependenceJump(independence), "independence jump"), rest * fraction * (1 - carry)))
         if carry:
             move = emcee.moves.MHMove(RidgeCarry(ridge_parts, ridge_weights, fresh=problem.ic_start - 1))
-            moves.append((move, rest * fraction * carry))
+            moves.append((CountedMove(move, "ridge carry"), rest * fraction * carry))
     if fraction < 1:
         g0 = 2.38 / np.sqrt(2 * problem.dim)
         for kind, share in DE_MIX:
-            move = (emcee.moves.DESnookerMove(live_dangerously=dangerous) if kind == "snooker"
-                    else emcee.moves.DEMove(gamma0=kind * g0, live_dangerously=dangerous))
+            move = (CountedMove(emcee.moves.DESnookerMove(live_dangerously=dangerous), "DE snooker")
+                    if kind == "snooker" else
+                    CountedMove(emcee.moves.DEMove(gamma0=kind * g0, live_dangerously=dangerous), f"DE, γ × {kind:g}"))
             moves.append((move, rest * (1 - fraction) * share))
     return moves
 

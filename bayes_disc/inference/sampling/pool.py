@@ -8,7 +8,7 @@ import numpy as np
 
 from ...physics.parallel import mp_context
 from .backend import RoundBackend
-from .mixing import _moves
+from .mixing import _moves, move_counts
 
 
 # ------------------------------------------------------------------------------------------------------
@@ -48,15 +48,16 @@ def _pool(settings, initargs):
                              initargs=initargs)
 
 
-def _advance(task) -> int:
+def _advance(task) -> tuple[int, dict]:
+    """Advance one ensemble's file by ``n_steps``; its steps stored and its moves' counts
+    ({label: [share, proposed, accepted]}: :func:`.mixing.move_counts`) over these steps."""
     path, n_steps, start, seed = task
     problem, proposal, independence = _WORKER["problem"], _WORKER["proposal"], _WORKER["independence"]
     backend = RoundBackend(str(path))
     nw = start.shape[0] if start is not None else backend.shape[0]
+    moves = _moves(problem, proposal, independence, _WORKER["fraction"], _WORKER["block_fraction"], nw)
     sampler = emcee.EnsembleSampler(nw, problem.dim, problem.log_prob_blobs, vectorize=True, backend=backend,
-                                    moves=_moves(problem, proposal, independence, _WORKER["fraction"],
-                                                 _WORKER["block_fraction"], nw),
-                                    blobs_dtype=float)
+                                    moves=moves, blobs_dtype=float)
     # fewer walkers than parameters (block moves on): they cannot be linearly independent, which emcee's
     # start check demands; the block moves, not the ensemble's span, make the chain move in every direction
     skip = nw <= problem.dim
@@ -68,4 +69,4 @@ def _advance(task) -> int:
             sampler.run_mcmc(None, n_steps, progress=False, skip_initial_state_check=skip)
     finally:
         backend.flush()     # the steps done, also when interrupted
-    return backend.iteration
+    return backend.iteration, move_counts(moves)

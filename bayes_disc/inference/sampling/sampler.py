@@ -60,7 +60,7 @@ from ..model.problem import Problem
 from .proposals import CompositeProposal, Proposal
 from .chains import Chains, StoredChains, _read, _read_history, chain_paths, saved_steps
 from .stopping import ADAPTATIONS, convergence, convergence_fraction
-from .mixing import initial_walkers, n_walkers
+from .mixing import add_counts, initial_walkers, n_walkers
 from .pool import _advance, _pool
 from .progress import Progress, _Bar
 
@@ -151,8 +151,20 @@ def _adapt(proposal: Proposal, independence: CompositeProposal, files: _Files, a
     return proposal, independence
 
 
+def _counts_since_adaptation(history: list) -> dict:
+    """The moves' counts ({label: [share, proposed, accepted]}) of the last convergence check after the last
+    warm-up adaptation in a run's history (empty when there is none): where a resumed run's counts go on."""
+    counts = {}
+    for entry in history:
+        if "adapted_proposal" in entry:
+            counts = {}
+        elif "moves" in entry:
+            counts = entry["moves"]
+    return counts
+
+
 def _finish(problem: Problem, settings: SamplerSettings, files: _Files, verdict: dict, checked, adapt_at: list,
-            history: list, t_start: float) -> Chains:
+            history: list, t_start: float, counts: dict) -> Chains:
     """The post-burn-in chains of the ensembles (of equal length) with σ drawn from its conditional."""
     lengths = {int(emcee.backends.HDFBackend(str(p), read_only=True).iteration) for p in files.paths}
     if len(lengths) != 1:
@@ -168,7 +180,7 @@ def _finish(problem: Problem, settings: SamplerSettings, files: _Files, verdict:
     files.history.write_text(json.dumps(history, indent=1))
     return Chains(chain=chain, log_prob=lp, sigma=sigma, acceptance=acc, burn=burn,
                   total_steps=total, tau=verdict["tau"], converged=verdict["converged"], reason=reason,
-                  history=history, wall_time_s=time.perf_counter() - t_start, ss=ss)
+                  history=history, wall_time_s=time.perf_counter() - t_start, ss=ss, moves=counts)
 
 
 def run_sampler(problem: Problem, independence: CompositeProposal | None, settings: SamplerSettings, out_dir: Path,
@@ -221,6 +233,7 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
     bar = _Bar(settings, progress)
     verdict = {"converged": False, "tau": np.full((1, problem.dim), np.nan)}
     checked, fraction = None, 0.0
+    counts = _counts_since_adaptation(history)     # the moves' proposals and acceptances since the warm-up
     bar.show(Progress(done, settings.max_steps, 0.0, None), checked=False)
     finished = False
     try:
@@ -235,6 +248,7 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
                     if done > 0 and proposal.adapted < ADAPTATIONS and done >= adapt_at[proposal.adapted]:
                         proposal, independence = _adapt(proposal, independence, files, adapt_at, done, settings,
                                                         problem.dim)
+                        counts = {}
                         record({"steps": done, "adapted_proposal": proposal.adapted,
                                 "independence_weights": np.exp(independence.log_weights).round(4).tolist()})
                         logger.debug(f"warm-up adaptation {proposal.adapted} of {ADAPTATIONS} at step {done}")
@@ -244,7 +258,7 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
                                               first_step=adapt_at[-1])
                         checked, fraction = done, convergence_fraction(verdict, settings, done)
                         record({"steps": done, "elapsed_s": round(time.perf_counter() - t_start, 3),
-                                **{k: v for k, v in verdict.items() if k != "tau"}})
+                                **{k: v for k, v in verdict.items() if k != "tau"}, "moves": counts})
                         bar.show(Progress(done, settings.max_steps, fraction, verdict), checked=True)
                         if verdict["converged"]:
                             finished = True
@@ -256,11 +270,14 @@ def run_sampler(problem: Problem, independence: CompositeProposal | None, settin
                     if proposal.adapted < ADAPTATIONS:
                         n = min(n, adapt_at[proposal.adapted] - done)
                     tasks = [(p, n, s, settings.seed * 1000 + e) for e, (p, s) in enumerate(zip(paths, starts))]
-                    steps = [int(k) for k in pool.map(_advance, tasks)]
+                    advanced = pool.map(_advance, tasks)
+                    steps = [int(k) for k, _ in advanced]
+                    for _, c in advanced:
+                        counts = add_counts(counts, c)
                     done = min(steps)
                     starts = [None] * len(paths)
                     bar.show(Progress(done, settings.max_steps, fraction, verdict if checked is not None else None),
                              checked=False)
     finally:
         bar.close()
-    return _finish(problem, settings, files, verdict, checked, adapt_at, history, t_start)
+    return _finish(problem, settings, files, verdict, checked, adapt_at, history, t_start, counts)
