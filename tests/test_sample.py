@@ -65,6 +65,8 @@ def test_same_seed_same_summary_and_outputs(tmp_path):
     loo = az.loo(idata)
     assert loo.n_data_points == a["flights"]["short"]["points"] and np.isfinite(loo.elpd_loo)
     _check_move_counts(a, runs[0], since=30)
+    # one flight's posterior is close to Gaussian: its mean lies near its mode, above the typical draw
+    assert a["convergence"]["log_prob_gap_at_mean"] < 0
 
 
 def _check_move_counts(summary: dict, out: Path, since: int):

@@ -290,17 +290,24 @@ def _trace_bands(ctx, names):
 
 def _moves_table(conv: dict) -> str:
     """The sampler's moves after the warm-up: share of the proposals, proposals and acceptance; a sentence
-    when some have stalled (:func:`stalled_moves`). Empty for runs that do not record them."""
+    when some have stalled (:func:`stalled_moves`), with where the draws' mean lies (``log_prob_gap_at_mean``)
+    against a Gaussian posterior of as many parameters (``dimension``). Empty for runs that do not record
+    them."""
     moves = conv.get("moves") or {}
     if not moves:
         return ""
+    gap, dim = conv.get("log_prob_gap_at_mean"), conv.get("dimension")
+    shape = ("" if gap is None else
+             f" The log-posterior at the draws' mean lies {fmt(gap, 3)} nats below that of the median draw"
+             + (f" (for a Gaussian posterior of {dim} parameters it lies about {dim / 2:g} above)" if dim else "")
+             + (": the posterior is curved." if gap > 0 else "."))
     rows = [[label, fmt(m["share"], 2), fmt_count(m["proposals"]),
              "–" if m["acceptance"] is None else f"{100 * m['acceptance']:.1f} %"] for label, m in moves.items()]
     stalled = stalled_moves(moves)
     note = (f"<p><b>{esc(' and '.join(stalled))}</b> accepted less than {STALLED_ACCEPTANCE:.0%} of the time: "
             "these proposals (an approximation of the posterior drawn from afresh) do not fit it — typically a "
             "curved or very thin ridge — so the walkers moved by the local moves alone, and the autocorrelation "
-            "times are long.</p>" if stalled else "")
+            f"times are long.{esc(shape)}</p>" if stalled else "")
     return ("<h3>Moves after the warm-up</h3>" + table(["move", "share", "proposals", "accepted"], rows, "num")
             + note)
 

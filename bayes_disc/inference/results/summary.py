@@ -107,6 +107,16 @@ def stalled_moves(moves: dict) -> list[str]:
             and m["acceptance"] is not None and m["acceptance"] < STALLED_ACCEPTANCE]
 
 
+def mean_draw_gap(problem: Problem, chains: Chains) -> float | None:
+    """How far the log-posterior at the draws' mean lies below that of the median draw [nats]: about −dim/2
+    for a Gaussian posterior (its mean is its mode), positive when the posterior is curved — a bent ridge
+    whose mean lies off it, where a Gaussian approximation of the draws puts its centre. None when the
+    model cannot be evaluated at the mean."""
+    mean = chains.chain.reshape(-1, problem.dim).mean(axis=0)
+    at_mean = float(problem.log_prob(mean[None])[0])
+    return float(np.median(chains.log_prob) - at_mean) if np.isfinite(at_mean) else None
+
+
 def build_summary(problem: Problem, chains: Chains, idata, ls_dict: dict, cfg_info: dict, threads: int = 1) -> dict:
     """summary.json (docs/outputs.md) of a run: parameter records (:func:`summarize`, in ``threads`` threads),
     convergence, literature."""
@@ -132,6 +142,7 @@ def build_summary(problem: Problem, chains: Chains, idata, ls_dict: dict, cfg_in
             "ess_bulk_min_coefficient": float(min(params[c]["ess_bulk"] for c in coef)),
             "acceptance_mean": float(np.mean(chains.acceptance)),
             "moves": move_records(chains.moves),
+            "log_prob_gap_at_mean": mean_draw_gap(problem, chains), "dimension": int(problem.dim),
         },
         "least_squares": ls_dict,
         **cfg_info,
