@@ -440,7 +440,7 @@ def section_real() -> list[str]:
          "reported out of model. Files: `runs/flatball/out/` (`sample`, `diagnose`) and `runs/flatball/loo/` "
          "(leave one throw out, then `predict`).", "",
          f"Sampler: {conv['reason']} (R-hat max {conv['r_hat_max']:.4f}, N/τ {conv['n_over_tau']:.1f}, smallest "
-         f"coefficient bulk ESS {conv['ess_bulk_min_coefficient']:.0f}).", ""]
+         f"coefficient bulk ESS {conv['ess_bulk_min_coefficient']:.0f}).{sampler_moves(conv)}", ""]
     L += table(["coefficient", "posterior median (90 %)", "Hummel & Hubbard 2002", "Potts & Crowther 2000"], rows)
     L += real_time_base(summ) + real_wobble(diag)
     # misfit against the noise floor
@@ -499,6 +499,25 @@ def section_real() -> list[str]:
           "runs/flatball/loo/<throw>/held.yaml --from runs/flatball/loo/<throw>/out_fit --overwrite` "
           "(`--overwrite` replaces the committed results).", ""]
     return L
+
+
+def sampler_moves(conv: dict) -> str:
+    """The moves' acceptance after the warm-up and where the draws' mean lies (summary.json ``convergence``),
+    as a sentence; empty for a run that does not record them."""
+    moves = conv.get("moves") or {}
+    if not moves:
+        return ""
+    parts = ", ".join(f"{label} {100 * m['acceptance']:.1f} %" for label, m in
+                      sorted(moves.items(), key=lambda kv: -kv[1]["share"]) if m["acceptance"] is not None)
+    text = f" Moves after the warm-up, share of their proposals accepted (largest share first): {parts}."
+    gap, dim = conv.get("log_prob_gap_at_mean"), conv.get("dimension")
+    if gap is not None and dim:
+        text += (f" The log-posterior at the draws' mean lies {abs(gap):.0f} nats {'below' if gap > 0 else 'above'} "
+                 "the median draw's; for a "
+                 f"Gaussian posterior of {dim} parameters it would lie about {dim / 2:.0f} above"
+                 + (": the posterior is curved, and a Gaussian fitted to the draws centres where it is low." if gap > 0
+                    else "."))
+    return text
 
 
 def real_time_base(summ: dict) -> list[str]:

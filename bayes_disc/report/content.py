@@ -298,7 +298,8 @@ def _moves_table(conv: dict) -> str:
         return ""
     gap, dim = conv.get("log_prob_gap_at_mean"), conv.get("dimension")
     shape = ("" if gap is None else
-             f" The log-posterior at the draws' mean lies {fmt(gap, 3)} nats below that of the median draw"
+             f" The log-posterior at the draws' mean lies {fmt(abs(gap), 3)} nats {'below' if gap > 0 else 'above'} "
+             "that of the median draw"
              + (f" (for a Gaussian posterior of {dim} parameters it lies about {dim / 2:g} above)" if dim else "")
              + (": the posterior is curved." if gap > 0 else "."))
     rows = [[label, fmt(m["share"], 2), fmt_count(m["proposals"]),

@@ -115,23 +115,27 @@ def _moves(problem: Problem, proposal: Proposal, independence: CompositeProposal
             if kind == "gibbs":
                 move = CountedMove(FlightBlockMove(problem, conditional), "flight sweep, random walk")
             elif kind == "refresh":
-                move = CountedMove(RidgeFlightRefresh(problem, ridge_parts, ridge_weights), "flight sweep, ridge refresh")
+                move = CountedMove(RidgeFlightRefresh(problem, ridge_parts, ridge_weights),
+                                   "flight sweep, ridge refresh")
             else:
                 move = CountedMove(emcee.moves.MHMove(SharedShift(shared, regression)), "shared shift")
             moves.append((move, block_fraction * share))
     rest = 1.0 - block_fraction
     if fraction > 0:
         carry = CARRY_SHARE if ridges else 0.0
-        moves.append((CountedMove(IndependenceJump(independence), "independence jump"), rest * fraction * (1 - carry)))
+        jump = CountedMove(IndependenceJump(independence), "independence jump")
+        moves.append((jump, rest * fraction * (1 - carry)))
         if carry:
             move = emcee.moves.MHMove(RidgeCarry(ridge_parts, ridge_weights, fresh=problem.ic_start - 1))
             moves.append((CountedMove(move, "ridge carry"), rest * fraction * carry))
     if fraction < 1:
         g0 = 2.38 / np.sqrt(2 * problem.dim)
         for kind, share in DE_MIX:
-            move = (CountedMove(emcee.moves.DESnookerMove(live_dangerously=dangerous), "DE snooker")
-                    if kind == "snooker" else
-                    CountedMove(emcee.moves.DEMove(gamma0=kind * g0, live_dangerously=dangerous), f"DE, γ × {kind:g}"))
+            if kind == "snooker":
+                move = CountedMove(emcee.moves.DESnookerMove(live_dangerously=dangerous), "DE snooker")
+            else:
+                move = CountedMove(emcee.moves.DEMove(gamma0=kind * g0, live_dangerously=dangerous),
+                                   f"DE, γ × {kind:g}")
             moves.append((move, rest * (1 - fraction) * share))
     return moves
 
