@@ -332,8 +332,11 @@ def launch_speeds(post: dict, fold_ls: dict) -> str:
     every = [s for v in folds.values() for s in v.values()]
     if not full or not every:
         return ""
-    return (f" The release airspeeds show why: the run flies the throws at {min(full.values()):.0f}–"
-            f"{max(full.values()):.0f} m/s, the folds at {min(every):.0f}–{max(every):.0f} m/s. An inertial log does "
+    def span(values):
+        lo, hi = f"{min(values):.0f}", f"{max(values):.0f}"
+        return lo if lo == hi else f"{lo}–{hi}"
+    return (f" The release airspeeds show why: the run flies the throws at {span(full.values())} m/s, the folds at "
+            f"{span(every)} m/s. An inertial log does "
             "not measure the airspeed, and the coefficients scale with it "
             "([inertial recordings](inertial.md#measurement-model)).")
 
