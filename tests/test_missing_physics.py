@@ -196,6 +196,7 @@ def test_diagnose_finds_nothing_missing_in_correct_data(tmp_path):
     assert result["verdict"] == "adequate", result["words"]
     assert result["effects"] == [] and result["unexplained"] == []
     assert result["rms_after_mm"] == result["rms_before_mm"]
+    assert result["lines"] is None               # white residuals: no sinusoid holds 30 % of any series
 
 
 def test_diagnose_bad_config_is_one_line_error(tmp_path, capsys):

@@ -63,6 +63,7 @@ from .missing_physics import (CANDIDATES, EVIDENCE_THRESHOLD, SHARE_PARTIAL, Dia
 from .mismatch import describe_where, fingerprint
 from .mismatch import onset_of_mismatch, onset_unavailable
 from .residuals import noise_floor, peak_window
+from .lines import residual_lines
 from .wobble import wobble_records
 from .diagnosis_words import rms_text, words
 
@@ -525,6 +526,7 @@ def diagnosis_record(analysis: Analysis, before_est: dict, after_est: dict, refi
         result["learned_discrepancy"] = learned_record(learned, diag) if learned is not None else {
             "selected": 0, "reason": f"no column of the correction reaches |z| ≥ {Z_KEEP:.0f}"}
     result["wobble"] = wobble_records(base.problem, base.ls.theta) or None
+    result["lines"] = residual_lines(base.residuals) or None
     result["words"] = words(result)
     return result
 

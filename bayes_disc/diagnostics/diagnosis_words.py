@@ -1,6 +1,6 @@
 """The diagnosis in words: RMS per flight and channel, the effects adopted and how much of the misfit they
 explain, what stays unexplained, the candidates turned down, the noise verdict, the learned correction and the
-wobble of inertial throws — read from a ``diagnosis.json`` record (:func:`.diagnosis.diagnosis_record`)."""
+wobble of inertial throws and the oscillations left in the residuals — read from a ``diagnosis.json`` record (:func:`.diagnosis.diagnosis_record`)."""
 from __future__ import annotations
 
 import numpy as np
@@ -113,6 +113,21 @@ def choice_words(noise: dict) -> list[str]:
             + "; ".join(r["text"] for r in choice.values()) + "."]
 
 
+def lines_words(result: dict) -> list[str]:
+    """One sentence per flight naming the oscillations left in its residuals (``lines`` of diagnosis.json:
+    :mod:`.lines`): series, amplitude, frequency, its multiple of the spin and its share of the series."""
+    out = []
+    for flight, per in (result.get("lines") or {}).items():
+        items = []
+        for name, line in per.items():
+            k, u = _RMS_DISPLAY.get(line["unit"], (1.0, line["unit"]))
+            spin = f"{line['per_spin']:.3f} × spin, " if line.get("per_spin") else ""
+            items.append(f"{SERIES_WORDS.get(name, name)} {line['amplitude'] * k:.2g} {u} at "
+                         f"{line['frequency_hz']:.2f} Hz ({spin}{_share_text(line['share'])} of its residual)")
+        out.append(f"Oscillations left in flight {flight}: " + "; ".join(items) + ".")
+    return out
+
+
 def words(result: dict) -> str:
     """The diagnosis in words (printed by the command, shown in the report)."""
     lines = []
@@ -132,6 +147,7 @@ def words(result: dict) -> str:
         lines.append("RMS " + rms_text(before) + ".")
         lines += [] if noise.get("adopted") else choice_words(noise)
         lines += [w["words"] for w in (result.get("wobble") or {}).values()]
+        lines += lines_words(result)
         if skipped:
             lines.append("Not tried: " + ", ".join(f"{c} ({why})" for c, why in skipped.items()) + ".")
         return "\n".join(lines)
@@ -177,6 +193,7 @@ def words(result: dict) -> str:
     if learned:
         lines.append(learned)
     lines += [w["words"] for w in (result.get("wobble") or {}).values()]
+    lines += lines_words(result)
     if skipped:
         lines.append("Not tried: " + ", ".join(f"{c} ({why})" for c, why in skipped.items()) + ".")
     return "\n".join(lines)

@@ -192,6 +192,15 @@ def missing_physics_section(ctx) -> Section | None:
             [[u["flight"], ", ".join(u["series"]), "–".join(f"{x:.2f}" for x in u["peak_window_s"]),
               "–".join(f"{x:.2f}" for x in u["peak_height_m"]) if u.get("peak_height_m") else "–",
               fmt(u.get("model_follows_until_s")), fmt(u.get("rms_mm"))] for u in unexplained]))
+    lines = data.get("lines") or {}
+    if lines:
+        parts.append("<h3>Oscillations left in the residuals</h3><p>The strongest sinusoid of each residual series "
+                     "of the base fit, where it holds at least 30 % of the series (white residuals: about 4 %); its "
+                     "frequency also as a multiple of the mean spin rate.</p>" + table(
+                         ["flight", "series", "amplitude", "frequency [Hz]", "× spin", "cycles", "share"],
+                         [[f, n, f"{x['amplitude']:.3g} {x['unit']}", f"{x['frequency_hz']:.3f}",
+                           _fixed(x.get("per_spin"), ".3f"), f"{x['cycles']:.1f}", fmt_percent(x["share"])]
+                          for f, per in lines.items() for n, x in per.items()]))
     cands = data.get("candidates") or []
     if cands:
         parts.append("<h3>Every candidate</h3>" + table(
