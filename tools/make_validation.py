@@ -481,7 +481,7 @@ def section_real() -> list[str]:
              ", ".join(f"{f.split('-')[-2]}-{f.split('-')[-1]} " + f"{g:+.0f}".replace("-", "−") for f, g in (c.get("per_flight_gain") or {}).items())]
             for c in cands[:6]]
     L += table(["candidate", "ΔBIC", "share of the excess removed", "status", "gain per throw"], crow)
-    L += [""]
+    L += [""] + real_lines(diag)
     far = max(ratios) if ratios else float("nan")
     L += [f"Verdict: **the misfit is far above the sensor noise** — every sensor group's fitted σ is "
           f"{min(ratios):.1f}–{max(ratios):.1f}× its noise floor, and the transverse gyro misfit is "
@@ -502,6 +502,19 @@ def section_real() -> list[str]:
           "runs/flatball/loo/<throw>/held.yaml --from runs/flatball/loo/<throw>/out_fit --overwrite` "
           "(`--overwrite` replaces the committed results).", ""]
     return L
+
+
+def real_lines(diag: dict) -> list[str]:
+    """The oscillations the base fit leaves in the real throws' residuals (``diagnosis.json`` → ``lines``)."""
+    lines = diag.get("lines") or {}
+    if not lines:
+        return []
+    rows = [[f.split("-", 3)[-1], n, f"{x['amplitude']:.3g} {x['unit']}", f"{x['frequency_hz']:.2f}",
+             f"{x['per_spin']:.3f}" if x.get("per_spin") else "–", f"{x['cycles']:.1f}", f"{100 * x['share']:.0f} %"]
+            for f, per in lines.items() for n, x in per.items()]
+    return (["Oscillations left in the residuals (`diagnosis.json` → `lines`): per throw, every residual series whose "
+             "strongest sinusoid holds at least 30 % of it (white residuals: about 4 %).", ""]
+            + table(["throw", "series", "amplitude", "frequency [Hz]", "× spin", "cycles", "share"], rows) + [""])
 
 
 def sampler_moves(conv: dict) -> str:

@@ -13,7 +13,9 @@ and its share of the series is
 (the Lomb–Scargle periodogram with a floating mean, normalised to the variance). The line is the f of largest
 s on a grid from :data:`MIN_CYCLES`/T (at least that many cycles in the flight: a slower change is a trend, not an
 oscillation) to the Nyquist frequency 1/(2 Δt) (Δt: the median sample step), spaced 1/(:data:`OVERSAMPLING` T).
-Its amplitude is √(a² + b²) in the series' unit; a line is reported when s ≥ :data:`LINE_SHARE`. For white
+The line must be a peak of s inside the grid: where s only rises towards the slowest trial frequency, the
+series holds a trend, not an oscillation. Its amplitude is √(a² + b²) in the series' unit; a line is reported
+when s ≥ :data:`LINE_SHARE`. For white
 residuals the largest share over the n/2 independent frequencies is about 2 ln(n/2)/n (0.04 for 240 samples), so
 a reported line is never noise; it may be a beat, a mode of the flight the model lacks, or a sensor effect.
 
@@ -47,8 +49,8 @@ def strongest_line(t: np.ndarray, x: np.ndarray) -> dict | None:
     -------
     dict or None
         ``frequency_hz``, ``amplitude`` (unit of x), ``share`` (of the series' variance about its mean) and
-        ``cycles`` (in the span); None when fewer than 8 finite samples or a span too short for
-        :data:`MIN_CYCLES` cycles below the Nyquist frequency.
+        ``cycles`` (in the span); None when fewer than 8 finite samples, a span too short for
+        :data:`MIN_CYCLES` cycles below the Nyquist frequency, or no peak of the share inside the grid.
     """
     ok = np.isfinite(x) & np.isfinite(t)
     t, x = np.asarray(t, float)[ok], np.asarray(x, float)[ok]
@@ -69,7 +71,10 @@ def strongest_line(t: np.ndarray, x: np.ndarray) -> dict | None:
     rhs = np.einsum("mni,n->mi", basis, xc)
     coef = np.linalg.solve(gram, rhs[..., None])[..., 0]                     # (m, 3)
     explained = np.einsum("mi,mi->m", coef, rhs)                              # ‖projection‖² = cᵀ Bᵀ x
-    k = int(np.argmax(explained))
+    inner = np.flatnonzero((explained[1:-1] >= explained[:-2]) & (explained[1:-1] >= explained[2:])) + 1
+    if inner.size == 0:
+        return None
+    k = int(inner[np.argmax(explained[inner])])
     return {"frequency_hz": float(freqs[k]), "amplitude": float(np.hypot(coef[k, 0], coef[k, 1])),
             "share": float(explained[k] / total), "cycles": float(freqs[k] * span)}
 
