@@ -1,6 +1,7 @@
 """The diagnosis in words: RMS per flight and channel, the effects adopted and how much of the misfit they
-explain, what stays unexplained, the candidates turned down, the noise verdict, the learned correction and the
-wobble of inertial throws and the oscillations left in the residuals — read from a ``diagnosis.json`` record (:func:`.diagnosis.diagnosis_record`)."""
+explain, what stays unexplained, the candidates turned down, the noise verdict, the learned correction, the
+wobble of inertial throws and the oscillations left in the residuals — read from a ``diagnosis.json`` record
+(:func:`.diagnosis.diagnosis_record`)."""
 from __future__ import annotations
 
 import numpy as np

@@ -10,14 +10,14 @@ and its share of the series is
 
     s(f) = 1 − RSS(f) / Σ (x_i − x̄)²
 
-(the Lomb–Scargle periodogram with a floating mean, normalised to the variance). The line is the f of largest
-s on a grid from :data:`MIN_CYCLES`/T (at least that many cycles in the flight: a slower change is a trend, not an
-oscillation) to the Nyquist frequency 1/(2 Δt) (Δt: the median sample step), spaced 1/(:data:`OVERSAMPLING` T).
-The line must be a peak of s inside the grid: where s only rises towards the slowest trial frequency, the
-series holds a trend, not an oscillation. Its amplitude is √(a² + b²) in the series' unit; a line is reported
-when s ≥ :data:`LINE_SHARE`. For white
-residuals the largest share over the n/2 independent frequencies is about 2 ln(n/2)/n (0.04 for 240 samples), so
-a reported line is never noise; it may be a beat, a mode of the flight the model lacks, or a sensor effect.
+(the Lomb–Scargle periodogram with a floating mean, normalised to the variance), on a grid from
+:data:`MIN_CYCLES`/T (at least that many cycles in the flight: a slower change is a trend, not an oscillation)
+to the Nyquist frequency 1/(2 Δt) (Δt: the median sample step), spaced 1/(:data:`OVERSAMPLING` T). The line is
+the highest peak of s inside the grid (where s only rises towards the slowest trial frequency, the series holds
+a trend), its amplitude √(a² + b²) in the series' unit; it is reported when s ≥ :data:`LINE_SHARE`. For white
+residuals the largest share over the n/2 independent frequencies is about 2 ln(n/2)/n (0.04 for 240 samples),
+far below the threshold: a reported line is structure the model leaves — a beat, a mode of the flight the
+model lacks, or a sensor effect.
 
 The spin's multiple f / (|r̄|/2π) (r̄: the mean spin rate along the predicted trajectory, rad/s) ties the line to
 the disc's rotation: 1 is once per revolution in the body, the wobble turns at about Ia/Id − 1 ≈ 0.93 of it, and
@@ -33,6 +33,8 @@ LINE_SHARE = 0.3
 MIN_CYCLES = 2.0
 #: frequency grid spacing: 1 / (OVERSAMPLING · span)
 OVERSAMPLING = 8
+#: trial frequencies fitted at once (bounds the memory of a long series)
+CHUNK = 256
 
 
 def strongest_line(t: np.ndarray, x: np.ndarray) -> dict | None:
@@ -65,18 +67,24 @@ def strongest_line(t: np.ndarray, x: np.ndarray) -> dict | None:
     total = float(xc @ xc)
     if total == 0.0:
         return None
-    phase = 2.0 * np.pi * np.outer(freqs, t - t.mean())                       # (m, n)
-    basis = np.stack([np.cos(phase), np.sin(phase), np.ones_like(phase)], axis=2)
-    gram = np.einsum("mni,mnj->mij", basis, basis)
-    rhs = np.einsum("mni,n->mi", basis, xc)
-    coef = np.linalg.solve(gram, rhs[..., None])[..., 0]                     # (m, 3)
-    explained = np.einsum("mi,mi->m", coef, rhs)                              # ‖projection‖² = cᵀ Bᵀ x
+    coef = np.concatenate([_sinusoid_fits(f, t - t.mean(), xc) for f in np.array_split(freqs, -(-freqs.size // CHUNK))])
+    explained = coef[:, 3]
     inner = np.flatnonzero((explained[1:-1] >= explained[:-2]) & (explained[1:-1] >= explained[2:])) + 1
     if inner.size == 0:
         return None
     k = int(inner[np.argmax(explained[inner])])
     return {"frequency_hz": float(freqs[k]), "amplitude": float(np.hypot(coef[k, 0], coef[k, 1])),
             "share": float(explained[k] / total), "cycles": float(freqs[k] * span)}
+
+
+def _sinusoid_fits(freqs: np.ndarray, t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """(m, 4): a, b, c of x ≈ a cos 2πf t + b sin 2πf t + c at each f, and the squared norm of that fit."""
+    phase = 2.0 * np.pi * np.outer(freqs, t)                                  # (m, n)
+    basis = np.stack([np.cos(phase), np.sin(phase), np.ones_like(phase)], axis=2)
+    gram = np.einsum("mni,mnj->mij", basis, basis)
+    rhs = np.einsum("mni,n->mi", basis, x)
+    coef = np.linalg.solve(gram, rhs[..., None])[..., 0]
+    return np.column_stack([coef, np.einsum("mi,mi->m", coef, rhs)])        # ‖projection‖² = cᵀ Bᵀ x
 
 
 def flight_lines(fr, share: float = LINE_SHARE) -> dict:
