@@ -484,6 +484,22 @@ def test_flagged_points_and_swapped_frames_are_listed(tiny, tmp_path):
     sec = build_sections(ReportContext(run, tmp_path / "f3"), [findings.flagged_section])[0]
     assert "cannot be trusted" in sec.html and "<td>CLa</td>" not in sec.html
 
+def test_missing_physics_section_tables_the_oscillations_left(tiny, tmp_path):
+    """diagnosis.json's ``lines``: a table row per series (amplitude with unit, frequency, × spin, cycles, share)."""
+    from bayes_disc.report import findings
+    run = load_run(tiny["run"])
+    line = {"frequency_hz": 0.7993, "amplitude": 0.441, "share": 0.419, "cycles": 2.88, "unit": "m/s²",
+            "per_spin": 0.0813}
+    run.extras["diagnosis"] = {"verdict": "missing_physics", "words": "w", "lines": {"003-rf": {"acc_z": line}}}
+    sec = build_sections(ReportContext(run, tmp_path / "f0"), [findings.missing_physics_section])[0]
+    assert "Oscillations left in the residuals" in sec.html
+    assert re.search(r"<td>003-rf</td><td[^>]*>acc_z</td><td[^>]*>0.441 m/s²</td><td[^>]*>0.799</td>"
+                     r"<td[^>]*>0.081</td><td[^>]*>2.9</td><td[^>]*>42 %</td>", sec.html), sec.html
+    run.extras["diagnosis"]["lines"] = None
+    sec = build_sections(ReportContext(run, tmp_path / "f1"), [findings.missing_physics_section])[0]
+    assert "Oscillations left" not in sec.html
+
+
 def test_diagnosis_adds_its_section_with_before_after_figure(tiny, tmp_path):
     """`diagnose` on a sampled run folder rebuilds the report with the missing-physics section filled in."""
     out = tmp_path / "out"
