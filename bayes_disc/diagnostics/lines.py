@@ -67,7 +67,8 @@ def strongest_line(t: np.ndarray, x: np.ndarray) -> dict | None:
     total = float(xc @ xc)
     if total == 0.0:
         return None
-    coef = np.concatenate([_sinusoid_fits(f, t - t.mean(), xc) for f in np.array_split(freqs, -(-freqs.size // CHUNK))])
+    chunks = np.array_split(freqs, -(-freqs.size // CHUNK))
+    coef = np.concatenate([_sinusoid_fits(f, t - t.mean(), xc) for f in chunks])
     explained = coef[:, 3]
     inner = np.flatnonzero((explained[1:-1] >= explained[:-2]) & (explained[1:-1] >= explained[2:])) + 1
     if inner.size == 0:
@@ -131,3 +132,4 @@ def residual_lines(residuals: list) -> dict:
     """
     out = {fr.name: flight_lines(fr) for fr in residuals}
     return {k: v for k, v in out.items() if v}
+
