@@ -132,4 +132,3 @@ def residual_lines(residuals: list) -> dict:
     """
     out = {fr.name: flight_lines(fr) for fr in residuals}
     return {k: v for k, v in out.items() if v}
-
