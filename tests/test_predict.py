@@ -4,6 +4,7 @@ The run folder is stood in for by a summary.json whose medians are the synthetic
 truth with CLa and CMa off by 30 % (a wrong one): the mechanics of the command do not need a sample run."""
 import json
 
+import numpy as np
 import pytest
 
 from bayes_disc.cli import main
@@ -73,9 +74,9 @@ def test_the_held_out_fit_keeps_the_better_of_its_two_starts(data):
     _, dev_poor = _fit_own(problem, poor, 0, max_nfev=3)
     _, dev_free = _fit_own(problem, free, 0, max_nfev=3)
     assert dev_free < dev_poor                                      # the two starts end apart in 3 evaluations
-    best = fit_held_out(problem, poor, free, 0, max_nfev=3)
+    best, how = fit_held_out(problem, poor, free, 0, max_nfev=3)
     _, ok = problem.residuals(best[None], 0)
-    assert ok[0]
+    assert ok[0] and how == "free"
     assert best[block] == pytest.approx(_fit_own(problem, free, 0, max_nfev=3)[0][block])
 
 
@@ -87,4 +88,35 @@ def test_a_throw_the_run_cannot_fly_is_failed_with_the_simulator_s_reason(data):
     assert main(["predict", str(d / "config.yaml"), "--from", str(run), "--output", str(d / "p_div")]) == 0
     held = json.loads((d / "p_div" / "prediction.json").read_text())["flights"]["held"]
     assert held["status"] == "failed" and held["channels"] == {}
+    assert "nor reached from the free fit by continuation (the continuation got " in held["reason"]
     assert held["reason"].endswith(": angular or aerodynamic rate above the integrator's rated envelope")
+
+
+def test_a_throw_neither_start_flies_is_reached_by_continuation(data, monkeypatch):
+    """Both starts stood in for as unflyable (deviance inf): the fixed fit comes from the continuation, which
+    follows the block from the free fit (λ = 0) to the run's shared values (λ = 1)."""
+    import bayes_disc.jobs.predict as predict
+    from bayes_disc.inference.fitting.leastsq import fit_least_squares
+    from bayes_disc.inference.model.config import load_config
+    from bayes_disc.inference.model.data import build_problem
+    d, truth = data
+    problem = build_problem(load_config(d / "config.yaml"))
+    free = fit_least_squares(problem, starts=1).theta
+    run = free.copy()
+    for i, n in enumerate(COEFFICIENT_NAMES):                   # a run whose coefficients are 20 % off the fit's
+        run[i] = free[i] * (1.2 if n in ("CLa", "CMa") else 1.0)
+    calls, real = [], predict._fit_own
+
+    def two_failed_starts(problem, x, k, max_nfev):
+        calls.append(x[: problem.ic_start].copy())
+        return (x, float("inf")) if len(calls) <= 2 else real(problem, x, k, max_nfev)
+    monkeypatch.setattr(predict, "_fit_own", two_failed_starts)
+    best, how = predict.fit_held_out(problem, run, free, 0, max_nfev=5)
+    assert how == "continuation"
+    assert best[: problem.ic_start] == pytest.approx(run[: problem.ic_start])        # at the run's values
+    _, ok = problem.residuals(best[None], 0)
+    assert ok[0]
+    lams = [float(np.linalg.norm(c - free[: problem.ic_start]) / np.linalg.norm(run[: problem.ic_start]
+                                                                                   - free[: problem.ic_start]))
+            for c in calls[2:]]
+    assert lams == pytest.approx(np.arange(1, 9) * predict.CONTINUATION_STEP)     # eight steps, none halved

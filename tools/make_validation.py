@@ -413,8 +413,8 @@ def section_missing_physics() -> list[str]:
              if not ld.get("white") else "."), "",
           "Reproduce (`--overwrite` replaces the committed diagnosis): `bayes-disc sample "
           "runs/concealed/config.yaml && bayes-disc diagnose runs/concealed/config.yaml --overwrite`; "
-          "`bayes-disc diagnose runs/concealed_nature/config.yaml --no-sample --overwrite`. The test suite's blind "
-          "tests "
+          "`bayes-disc sample runs/concealed_nature/config.yaml && bayes-disc diagnose "
+          "runs/concealed_nature/config.yaml --no-sample --overwrite`. The test suite's blind tests "
           "(`tests/test_missing_physics.py`, `tests/test_families.py`, `tests/test_discrepancy.py`; slow ones with "
           "`-m slow`) cover every term, both data explanations, ten data sets with nothing missing and a gust.", ""]
     return L

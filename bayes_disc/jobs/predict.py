@@ -9,14 +9,18 @@ Every flight of the configuration is fitted twice by least squares:
 * **free** — everything free (the flights of this configuration alone).
 
 The fixed fit starts both from the flight's own start and from its block of the free fit, and keeps the
-one with the lower profile deviance (the wobble's phase makes these fits multimodal); a flight that cannot
-be simulated with the fixed parameters from either start is reported ``failed`` with the reason.
+one with the lower profile deviance (the wobble's phase makes these fits multimodal). Where the flight cannot
+be simulated with the fixed parameters from either start, it is reached by continuation from the free fit
+(the shared parameters moved in steps from the free fit's values to the run's, the flight's block refitted at
+every step); a flight the continuation does not bring to the run's parameters either is reported ``failed``
+with the simulator's reason.
 
 The ratio of the two RMS per channel says how well the run's physics predicts a throw it did not see
 (≈ 1: as well as a fit to the throw itself). Inertial throws flown upside down are reported as
 ``out_of_model`` and not fitted. Output ``prediction.json``:
-``{"flights": {flight: {"status" (ok | failed | out_of_model), "reason", "channels": {channel: {"unit", "rms_fixed", "rms_free"}}}}}``,
-channels ``markers`` [m], ``gyro`` [rad/s], ``acc`` [m/s²].
+``{"flights": {flight: {"status" (ok | failed | out_of_model), "reason", "start" (own | free | continuation),
+"channels": {channel: {"unit", "rms_fixed", "rms_free"}}}}}``,
+channels ``markers`` [m], ``gyro`` [rad/s], ``acc`` [m/s²], ``mag`` [µT], ``baro`` [Pa].
 """
 from __future__ import annotations
 
@@ -95,13 +99,78 @@ def with_free_block(problem, theta: np.ndarray, free_theta: np.ndarray, k: int) 
     return out
 
 
+#: the continuation's largest step in λ (:func:`fit_by_continuation`)
+CONTINUATION_STEP = 0.125
+#: the step in λ below which the continuation gives up
+CONTINUATION_MIN_STEP = 1.0 / 128
+
+
+def fit_by_continuation(problem, theta: np.ndarray, free_theta: np.ndarray, k: int, max_nfev: int):
+    """Flight k's own block fitted with the shared entries of θ held, reached from the free fit.
+
+    The shared entries move along θ_s(λ) = (1 − λ) θ_s,free + λ θ_s from λ = 0 (the free fit) to λ = 1 (the
+    run's values); at every λ the block is refitted (:func:`_fit_own`) from the block of the last λ. A step
+    whose fit cannot be simulated is halved; after a success the step doubles again, up to
+    :data:`CONTINUATION_STEP`. This follows the block along with the shared parameters, where a fit started at
+    λ = 1 from the free fit's block may not fly at all (an initial wobble the run's coefficients drive beyond
+    the integrator's envelope).
+
+    Parameters
+    ----------
+    problem : Problem
+    theta : (dim,) array
+        The run's shared entries (θ[:ic_start]); its blocks are not read.
+    free_theta : (dim,) array
+        The free fit: the path's start.
+    k : int
+        The flight.
+    max_nfev : int
+        Budget of every refit.
+
+    Returns
+    -------
+    (dim,) array or None
+        The fit at λ = 1; None when the step fell below :data:`CONTINUATION_MIN_STEP` first.
+    float
+        The last λ whose fit could be simulated.
+    """
+    s = problem.ic_start
+    x, lam, step = free_theta.copy(), 0.0, CONTINUATION_STEP
+    while lam < 1.0:
+        trial = min(1.0, lam + step)
+        y = x.copy()
+        y[:s] = (1.0 - trial) * free_theta[:s] + trial * theta[:s]
+        y, deviance = _fit_own(problem, y, k, max_nfev)
+        log.debug("%s: continuation λ = %.4f, deviance %.6g", problem.flights[k].name, trial, deviance)
+        if np.isfinite(deviance):
+            x, lam, step = y, trial, min(2.0 * step, CONTINUATION_STEP)
+        else:
+            step /= 2.0
+            if step < CONTINUATION_MIN_STEP:
+                return None, lam
+    return x, lam
+
+
 def fit_held_out(problem, theta: np.ndarray, free_theta: np.ndarray, k: int, max_nfev: int):
     """Flight k's own block fitted with the shared entries of θ held, from two starts: the problem's own start
-    for the flight and the flight's block of the free fit (the wobble phase makes the fit multimodal). Returns
-    the better fit's θ (dim,), or None when neither can be simulated."""
-    fits = [_fit_own(problem, start, k, max_nfev) for start in (theta, with_free_block(problem, theta, free_theta, k))]
-    x, deviance = min(fits, key=lambda f: f[1])
-    return x if np.isfinite(deviance) else None
+    for the flight and the flight's block of the free fit (the wobble phase makes the fit multimodal); where
+    neither can be simulated, by continuation from the free fit (:func:`fit_by_continuation`).
+
+    Returns
+    -------
+    (dim,) array or None
+        The better fit's θ; None when no start reaches a fit that can be simulated.
+    str
+        How it was reached: ``own``, ``free`` or ``continuation``; for None, how far the continuation got.
+    """
+    starts = {"own": theta, "free": with_free_block(problem, theta, free_theta, k)}
+    fits = {name: _fit_own(problem, start, k, max_nfev) for name, start in starts.items()}
+    name = min(fits, key=lambda n: fits[n][1])
+    x, deviance = fits[name]
+    if np.isfinite(deviance):
+        return x, name
+    x, lam = fit_by_continuation(problem, theta, free_theta, k, max_nfev)
+    return (x, "continuation") if x is not None else (None, f"the continuation got {100 * lam:.2g} % of the way")
 
 
 def simulation_failure(problem, theta: np.ndarray, k: int) -> str:
@@ -154,21 +223,24 @@ def run_predict(cfg: RunConfig, run_dir, output=None) -> dict:
                              seed=cfg.sampler.seed)
     flights = {}
     for k, f in enumerate(problem.flights):
-        fixed = fit_held_out(problem, theta, free.theta, k, cfg.least_squares.max_nfev)
+        fixed, how = fit_held_out(problem, theta, free.theta, k, cfg.least_squares.max_nfev)
         if fixed is None:
             at_free = with_free_block(problem, theta, free.theta, k)
             flights[f.name] = {"status": "failed", "channels": {},
                                "reason": "with the run's coefficients and shared parameters the throw could not "
-                                         "be simulated from either start (the problem's and the free fit's): "
+                                         "be simulated from either start (the problem's and the free fit's) nor "
+                                         f"reached from the free fit by continuation ({how} to the run's "
+                                         "parameters): "
                                          + simulation_failure(problem, at_free, k)}
             log.warning("%s: %s", f.name, flights[f.name]["reason"])
             continue
         rf, rr = channel_rms(problem, fixed, k), channel_rms(problem, free.theta, k)
-        flights[f.name] = {"status": "ok", "reason": "",
+        flights[f.name] = {"status": "ok", "reason": "", "start": how,
                            "channels": {c: {"unit": CHANNELS[c][0], "rms_fixed": rf[c], "rms_free": rr[c]}
                                         for c in rf}}
-        log.info("%s: %s", f.name, ", ".join(f"{c} RMS fixed/free {rf[c]:.4g}/{rr[c]:.4g} {CHANNELS[c][0]} "
-                                             f"(×{rf[c] / rr[c]:.2f})" for c in rf))
+        log.info("%s: %s (fixed fit from the %s start)", f.name,
+                 ", ".join(f"{c} RMS fixed/free {rf[c]:.4g}/{rr[c]:.4g} {CHANNELS[c][0]} (×{rf[c] / rr[c]:.2f})"
+                           for c in rf), how)
     for t in throws:
         if t.status != "ok":
             flights[t.name] = {"status": t.status, "reason": t.reason, "channels": {}}
