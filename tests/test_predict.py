@@ -120,3 +120,42 @@ def test_a_throw_neither_start_flies_is_reached_by_continuation(data, monkeypatc
                                                                                    - free[: problem.ic_start]))
             for c in calls[2:]]
     assert lams == pytest.approx(np.arange(1, 9) * predict.CONTINUATION_STEP)     # eight steps, none halved
+
+
+def test_the_release_states_of_a_run_s_flights_are_read_by_kind():
+    from bayes_disc.inference.model.layout import FULL_IC, INERTIAL_IC
+    from bayes_disc.jobs.predict import run_release_states
+    params = {"CL0": 0.2}
+    params.update({f"{n}_t1": float(i) for i, n in enumerate(INERTIAL_IC.names)})
+    params.update({f"{n}_t2": 1.0 for n in INERTIAL_IC.names[:-1]})              # one missing: not a state
+    params.update({f"{n}_m": 2.0 for n in FULL_IC.names})
+    got = run_release_states(params, INERTIAL_IC)
+    assert list(got) == ["t1"] and got["t1"] == pytest.approx(np.arange(INERTIAL_IC.size))
+    assert list(run_release_states(params, FULL_IC)) == ["m"]
+
+
+def test_a_run_flight_s_release_state_is_a_start_of_the_held_out_fit(data, monkeypatch):
+    """Own and free starts stood in for as unflyable: the fit comes from the run flight's release state (its
+    initial conditions in the flight's block, the free fit's other entries), before any continuation."""
+    import bayes_disc.jobs.predict as predict
+    from bayes_disc.inference.fitting.leastsq import fit_least_squares
+    from bayes_disc.inference.model.config import load_config
+    from bayes_disc.inference.model.data import build_problem
+    d, _ = data
+    problem = build_problem(load_config(d / "config.yaml"))
+    free = fit_least_squares(problem, starts=1).theta
+    ics = problem.layout.ic_slice(0)
+    release = free[ics] * 1.01
+    starts, real = [], predict._fit_own
+
+    def own_and_free_fail(problem, x, k, max_nfev):
+        starts.append(x.copy())
+        return (x, float("inf")) if len(starts) <= 2 else real(problem, x, k, max_nfev)
+    monkeypatch.setattr(predict, "_fit_own", own_and_free_fail)
+    best, how = predict.fit_held_out(problem, free, free, 0, max_nfev=5, release_states={"other": release})
+    assert how == "run flight other" and len(starts) == 3                       # no continuation needed
+    assert starts[2][ics] == pytest.approx(release)
+    own = problem.layout.own_slice(0)
+    assert starts[2][own] == pytest.approx(free[own])
+    _, ok = problem.residuals(best[None], 0)
+    assert ok[0]

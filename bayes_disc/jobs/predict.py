@@ -8,17 +8,20 @@ Every flight of the configuration is fitted twice by least squares:
   flight's own initial conditions and nuisance parameters (row period, biases, filter state) free;
 * **free** — everything free (the flights of this configuration alone).
 
-The fixed fit starts both from the flight's own start and from its block of the free fit, and keeps the
-one with the lower profile deviance (the wobble's phase makes these fits multimodal). Where the flight cannot
-be simulated with the fixed parameters from either start, it is reached by continuation from the free fit
-(the shared parameters moved in steps from the free fit's values to the run's, the flight's block refitted at
-every step); a flight the continuation does not bring to the run's parameters either is reported ``failed``
-with the simulator's reason.
+The fixed fit starts from the flight's own start, from its block of the free fit and from the release state
+of every flight of the run (its fitted initial conditions, with the free fit's nuisance parameters), and keeps
+the one with the lowest profile deviance (the wobble's phase makes these fits multimodal; a throw of the same
+logger often flies only from a release the run's coefficients were fitted with). Where the flight cannot be
+simulated with the fixed parameters from any start, it is reached by continuation from the free fit (the shared
+parameters moved in steps from the free fit's values to the run's, the flight's block refitted at every step);
+a flight the continuation does not bring to the run's parameters either is reported ``failed`` with the
+simulator's reason.
 
 The ratio of the two RMS per channel says how well the run's physics predicts a throw it did not see
 (≈ 1: as well as a fit to the throw itself). Inertial throws flown upside down are reported as
 ``out_of_model`` and not fitted. Output ``prediction.json``:
-``{"flights": {flight: {"status" (ok | failed | out_of_model), "reason", "start" (own | free | continuation),
+``{"flights": {flight: {"status" (ok | failed | out_of_model), "reason", "start" (own | free | run flight <name> |
+continuation),
 "channels": {channel: {"unit", "rms_fixed", "rms_free"}}}}}``,
 channels ``markers`` [m], ``gyro`` [rad/s], ``acc`` [m/s²], ``mag`` [µT], ``baro`` [Pa].
 """
@@ -37,6 +40,7 @@ from ..observation.models import MarkerPositions
 from ..inference.model.config import RunConfig
 from ..inference.model.data import build_problem
 from ..inference.model.inertial import load_run_throws
+from ..inference.model.layout import InitialConditions
 from ..inference.fitting.leastsq import fit_least_squares
 from ..inference.fitting.residuals import FAILED_RESIDUAL
 
@@ -151,19 +155,56 @@ def fit_by_continuation(problem, theta: np.ndarray, free_theta: np.ndarray, k: i
     return x, lam
 
 
-def fit_held_out(problem, theta: np.ndarray, free_theta: np.ndarray, k: int, max_nfev: int):
-    """Flight k's own block fitted with the shared entries of θ held, from two starts: the problem's own start
-    for the flight and the flight's block of the free fit (the wobble phase makes the fit multimodal); where
-    neither can be simulated, by continuation from the free fit (:func:`fit_by_continuation`).
+def run_release_states(params: dict, kind: InitialConditions) -> dict:
+    """The release states of a run's flights: {flight: (kind.size,) initial conditions} for every flight whose
+    parameters ``params`` ({name: value}, as ``summary.json`` or ``least_squares.json`` hold them) include a
+    full set of initial conditions of ``kind`` (named ``<ic>_<flight>``)."""
+    first = kind.names[0] + "_"
+    out = {}
+    for key in params:
+        if key.startswith(first):
+            flight = key[len(first):]
+            names = [f"{n}_{flight}" for n in kind.names]
+            if all(n in params for n in names):
+                out[flight] = np.array([float(params[n]) for n in names])
+    return out
+
+
+def fit_held_out(problem, theta: np.ndarray, free_theta: np.ndarray, k: int, max_nfev: int,
+                 release_states: dict | None = None):
+    """Flight k's own block fitted with the shared entries of θ held, from several starts: the problem's own
+    start for the flight, the flight's block of the free fit and, for every run flight in ``release_states``,
+    the free fit's block with that flight's initial conditions (the wobble phase makes the fit multimodal);
+    where none can be simulated, by continuation from the free fit (:func:`fit_by_continuation`).
+
+    Parameters
+    ----------
+    problem : Problem
+    theta : (dim,) array
+        The run's shared entries (θ[:ic_start]) and the problem's own start for the flight.
+    free_theta : (dim,) array
+        The free fit.
+    k : int
+        The flight.
+    max_nfev : int
+        Budget of every fit.
+    release_states : dict, optional
+        {run flight: (n_ic,) its initial conditions, of flight k's kind} (:func:`run_release_states`).
 
     Returns
     -------
     (dim,) array or None
-        The better fit's θ; None when no start reaches a fit that can be simulated.
+        The best fit's θ; None when no start reaches a fit that can be simulated.
     str
-        How it was reached: ``own``, ``free`` or ``continuation``; for None, how far the continuation got.
+        How it was reached: ``own``, ``free``, ``run flight <name>`` or ``continuation``; for None, how far the
+        continuation got.
     """
-    starts = {"own": theta, "free": with_free_block(problem, theta, free_theta, k)}
+    free_start = with_free_block(problem, theta, free_theta, k)
+    starts = {"own": theta, "free": free_start}
+    for flight, ic in (release_states or {}).items():
+        start = free_start.copy()
+        start[problem.layout.ic_slice(k)] = ic
+        starts[f"run flight {flight}"] = start
     fits = {name: _fit_own(problem, start, k, max_nfev) for name, start in starts.items()}
     name = min(fits, key=lambda n: fits[n][1])
     x, deviance = fits[name]
@@ -223,12 +264,14 @@ def run_predict(cfg: RunConfig, run_dir, output=None) -> dict:
                              seed=cfg.sampler.seed)
     flights = {}
     for k, f in enumerate(problem.flights):
-        fixed, how = fit_held_out(problem, theta, free.theta, k, cfg.least_squares.max_nfev)
+        fixed, how = fit_held_out(problem, theta, free.theta, k, cfg.least_squares.max_nfev,
+                                  run_release_states(params, problem.layout.flight_ic[k]))
         if fixed is None:
             at_free = with_free_block(problem, theta, free.theta, k)
             flights[f.name] = {"status": "failed", "channels": {},
                                "reason": "with the run's coefficients and shared parameters the throw could not "
-                                         "be simulated from either start (the problem's and the free fit's) nor "
+                                         "be simulated from any start (the problem's, the free fit's and the run's "
+                                         "release states) nor "
                                          f"reached from the free fit by continuation ({how} to the run's "
                                          "parameters): "
                                          + simulation_failure(problem, at_free, k)}
@@ -238,7 +281,7 @@ def run_predict(cfg: RunConfig, run_dir, output=None) -> dict:
         flights[f.name] = {"status": "ok", "reason": "", "start": how,
                            "channels": {c: {"unit": CHANNELS[c][0], "rms_fixed": rf[c], "rms_free": rr[c]}
                                         for c in rf}}
-        log.info("%s: %s (fixed fit from the %s start)", f.name,
+        log.info("%s: %s (fixed fit from the start: %s)", f.name,
                  ", ".join(f"{c} RMS fixed/free {rf[c]:.4g}/{rr[c]:.4g} {CHANNELS[c][0]} (×{rf[c] / rr[c]:.2f})"
                            for c in rf), how)
     for t in throws:
