@@ -23,8 +23,8 @@ from scipy import stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from validation_common import (COEFFICIENTS, ROOT, binomial_band, familywise_mass, fmt,  # noqa: E402
-                               fold_names, inside, load, outside_probability, prediction_rows, table)
+from validation_common import (COEFFICIENTS, PREDICTION_HEADER, ROOT, binomial_band, familywise_mass,  # noqa: E402
+                               fmt, fold_names, inside, load, outside_probability, prediction_rows, table)
 from validation_fixed_truth import section_fixed_truth  # noqa: E402
 from validation_profile import section_profile_intervals  # noqa: E402
 from validation_wobble import real_wobble, section_real_wobble  # noqa: E402
@@ -466,7 +466,7 @@ def section_real() -> list[str]:
     prow = prediction_rows("runs/flatball/loo")
     L += ["", "Held-out prediction (`bayes-disc predict`): each throw fitted with the coefficients and logger "
               "parameters of the other two throws' fit (fixed) and with everything free.", ""]
-    L += table(["held-out throw", "channel", "unit", "RMS fixed", "RMS free", "fixed / free"], prow)
+    L += table(PREDICTION_HEADER, prow)
     cands = sorted(diag["candidates"], key=lambda c: -c["evidence"])
     best_share = max([c.get("share_explained") or 0 for c in diag["candidates"]] + [0])
     ld = diag.get("learned_discrepancy") or {}

@@ -62,17 +62,30 @@ def fold_names(rel: str) -> list[str]:
     return sorted(p.name for p in (ROOT / rel).iterdir() if p.is_dir())
 
 
+#: header of :func:`prediction_rows`
+PREDICTION_HEADER = ["held-out throw", "channel", "unit", "RMS fixed", "RMS free", "fixed / free", "fixed fit from"]
+
+
+def _start_text(start: str | None) -> str:
+    """Where ``predict``'s fixed fit started (``prediction.json`` → ``start``), in words."""
+    if start is None:
+        return "—"
+    if start.startswith("run flight "):
+        return f"the run's release state of {start[len('run flight '):]}"
+    return {"own": "the throw's own start", "free": "the free fit",
+            "continuation": "continuation from the free fit"}.get(start, start)
+
+
 def prediction_rows(rel: str) -> list[list[str]]:
-    """Rows (held-out throw, channel, unit, RMS fixed, RMS free, fixed / free) of every fold's
-    ``<rel>/<fold>/out_held/prediction.json`` (``bayes-disc predict``); a throw that was not fitted gives one row
-    with its status and reason."""
+    """Rows (:data:`PREDICTION_HEADER`) of every fold's ``<rel>/<fold>/out_held/prediction.json``
+    (``bayes-disc predict``); a throw that was not fitted gives one row with its status and reason."""
     rows = []
     for f in fold_names(rel):
         pred = load(f"{rel}/{f}/out_held/prediction.json")
         for fl, rec in pred["flights"].items():
             if rec["status"] != "ok":
-                rows.append([fl, "—", "—", "—", "—", f"{rec['status']}: {rec['reason']}"])
+                rows.append([fl, "—", "—", "—", "—", f"{rec['status']}: {rec['reason']}", "—"])
             for ch, v in rec.get("channels", {}).items():
                 rows.append([fl, ch, v["unit"], fmt(v["rms_fixed"]), fmt(v["rms_free"]),
-                             f"{v['rms_fixed'] / v['rms_free']:.2f}"])
+                             f"{v['rms_fixed'] / v['rms_free']:.2f}", _start_text(rec.get("start"))])
     return rows

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from validation_common import fmt, fold_names, load, prediction_rows, table
+from validation_common import PREDICTION_HEADER, fmt, fold_names, load, prediction_rows, table
 
 BASE = "runs/flatball/barometer/out"
 WOBBLE = "runs/flatball/wobble/out"
@@ -139,7 +139,7 @@ def held_out(params: dict, throws: list[str]) -> list[str]:
     L = ["", f"Held-out prediction with the terms (`{LOO}/`): each throw fitted with the coefficients, the terms' "
              "and the logger's parameters of the other two throws' least-squares fit held (fixed) and with "
              "everything free (`bayes-disc predict`).", ""]
-    L += table(["held-out throw", "channel", "unit", "RMS fixed", "RMS free", "fixed / free"], prediction_rows(LOO))
+    L += table(PREDICTION_HEADER, prediction_rows(LOO))
     L += ["", "The folds' fits: release speeds of the throws each fits [m/s] and the parameters that move most.", ""]
     L += table(["fit", "release speeds [m/s]", *FOLD_PARAMETERS], rows)
     return L
