@@ -99,7 +99,7 @@ def test_a_throw_neither_start_flies_is_reached_by_continuation(data, monkeypatc
     from bayes_disc.inference.fitting.leastsq import fit_least_squares
     from bayes_disc.inference.model.config import load_config
     from bayes_disc.inference.model.data import build_problem
-    d, truth = data
+    d, _ = data
     problem = build_problem(load_config(d / "config.yaml"))
     free = fit_least_squares(problem, starts=1).theta
     run = free.copy()

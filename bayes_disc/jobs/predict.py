@@ -20,9 +20,8 @@ simulator's reason.
 The ratio of the two RMS per channel says how well the run's physics predicts a throw it did not see
 (≈ 1: as well as a fit to the throw itself). Inertial throws flown upside down are reported as
 ``out_of_model`` and not fitted. Output ``prediction.json``:
-``{"flights": {flight: {"status" (ok | failed | out_of_model), "reason", "start" (own | free | run flight <name> |
-continuation),
-"channels": {channel: {"unit", "rms_fixed", "rms_free"}}}}}``,
+``{"flights": {flight: {"status" (ok | failed | out_of_model), "reason",
+"start" (own | free | run flight <name> | continuation), "channels": {channel: {"unit", "rms_fixed", "rms_free"}}}}}``,
 channels ``markers`` [m], ``gyro`` [rad/s], ``acc`` [m/s²], ``mag`` [µT], ``baro`` [Pa].
 """
 from __future__ import annotations
@@ -281,7 +280,7 @@ def run_predict(cfg: RunConfig, run_dir, output=None) -> dict:
         flights[f.name] = {"status": "ok", "reason": "", "start": how,
                            "channels": {c: {"unit": CHANNELS[c][0], "rms_fixed": rf[c], "rms_free": rr[c]}
                                         for c in rf}}
-        log.info("%s: %s (fixed fit from the start: %s)", f.name,
+        log.info("%s: %s (fixed fit started from: %s)", f.name,
                  ", ".join(f"{c} RMS fixed/free {rf[c]:.4g}/{rr[c]:.4g} {CHANNELS[c][0]} (×{rf[c] / rr[c]:.2f})"
                            for c in rf), how)
     for t in throws:
