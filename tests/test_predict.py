@@ -33,6 +33,16 @@ def data(tmp_path_factory):
     return d, json.loads((d / "truth.json").read_text())
 
 
+@pytest.fixture(scope="module")
+def fitted(data):
+    """The held-out configuration's problem and its free least-squares fit θ (one start)."""
+    from bayes_disc.inference.fitting.leastsq import fit_least_squares
+    from bayes_disc.inference.model.config import load_config
+    from bayes_disc.inference.model.data import build_problem
+    problem = build_problem(load_config(data[0] / "config.yaml"))
+    return problem, fit_least_squares(problem, starts=1).theta
+
+
 def test_right_coefficients_predict_as_well_as_a_free_fit_and_wrong_ones_do_not(data, capsys):
     d, truth = data
     right = _summary(d / "right", truth)
@@ -60,14 +70,9 @@ def test_a_run_with_another_model_is_refused(data, capsys):
     assert "no parameter 'CY'" in err and len(err.strip().splitlines()) == 1
 
 
-def test_the_held_out_fit_keeps_the_better_of_its_two_starts(data):
-    from bayes_disc.inference.fitting.leastsq import fit_least_squares
-    from bayes_disc.inference.model.config import load_config
-    from bayes_disc.inference.model.data import build_problem
+def test_the_held_out_fit_keeps_the_better_of_its_two_starts(fitted):
     from bayes_disc.jobs.predict import _fit_own, fit_held_out
-    d, _ = data
-    problem = build_problem(load_config(d / "config.yaml"))
-    free = fit_least_squares(problem, starts=1).theta
+    problem, free = fitted
     block = problem.layout.flight_slice(0)
     poor = free.copy()
     poor[block] = problem.start_vector()[block] * 0.5             # a start far from the flight's optimum
@@ -92,16 +97,11 @@ def test_a_throw_the_run_cannot_fly_is_failed_with_the_simulator_s_reason(data):
     assert held["reason"].endswith(": angular or aerodynamic rate above the integrator's rated envelope")
 
 
-def test_a_throw_neither_start_flies_is_reached_by_continuation(data, monkeypatch):
+def test_a_throw_neither_start_flies_is_reached_by_continuation(fitted, monkeypatch):
     """Both starts stood in for as unflyable (deviance inf): the fixed fit comes from the continuation, which
     follows the block from the free fit (λ = 0) to the run's shared values (λ = 1)."""
     import bayes_disc.jobs.predict as predict
-    from bayes_disc.inference.fitting.leastsq import fit_least_squares
-    from bayes_disc.inference.model.config import load_config
-    from bayes_disc.inference.model.data import build_problem
-    d, _ = data
-    problem = build_problem(load_config(d / "config.yaml"))
-    free = fit_least_squares(problem, starts=1).theta
+    problem, free = fitted
     run = free.copy()
     for i, n in enumerate(COEFFICIENT_NAMES):                   # a run whose coefficients are 20 % off the fit's
         run[i] = free[i] * (1.2 if n in ("CLa", "CMa") else 1.0)
@@ -134,16 +134,11 @@ def test_the_release_states_of_a_run_s_flights_are_read_by_kind():
     assert list(run_release_states(params, FULL_IC)) == ["m"]
 
 
-def test_a_run_flight_s_release_state_is_a_start_of_the_held_out_fit(data, monkeypatch):
+def test_a_run_flight_s_release_state_is_a_start_of_the_held_out_fit(fitted, monkeypatch):
     """Own and free starts stood in for as unflyable: the fit comes from the run flight's release state (its
     initial conditions in the flight's block, the free fit's other entries), before any continuation."""
     import bayes_disc.jobs.predict as predict
-    from bayes_disc.inference.fitting.leastsq import fit_least_squares
-    from bayes_disc.inference.model.config import load_config
-    from bayes_disc.inference.model.data import build_problem
-    d, _ = data
-    problem = build_problem(load_config(d / "config.yaml"))
-    free = fit_least_squares(problem, starts=1).theta
+    problem, free = fitted
     ics = problem.layout.ic_slice(0)
     release = free[ics] * 1.01
     starts, real = [], predict._fit_own

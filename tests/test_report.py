@@ -484,6 +484,7 @@ def test_flagged_points_and_swapped_frames_are_listed(tiny, tmp_path):
     sec = build_sections(ReportContext(run, tmp_path / "f3"), [findings.flagged_section])[0]
     assert "cannot be trusted" in sec.html and "<td>CLa</td>" not in sec.html
 
+
 def test_missing_physics_section_tables_the_oscillations_left(tiny, tmp_path):
     """diagnosis.json's ``lines``: a table row per series (amplitude with unit, frequency, × spin, cycles, share)."""
     from bayes_disc.report import findings
