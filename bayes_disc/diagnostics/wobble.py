@@ -52,6 +52,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from ..physics import axial_inertia
+from .wobble_beat import beat_words, late_beat
 
 __all__ = ["WobbleTrack", "decay_rate", "phasor_fit", "rigid_kappa", "rigid_nutation", "spin_phase", "throw_wobble",
            "wobble_summary", "wobble_track", "wobble_words"]
@@ -344,12 +345,15 @@ def throw_wobble(t: np.ndarray, measured: np.ndarray, predicted: np.ndarray, Ia:
         ``data``, ``model`` (:func:`wobble_summary`), ``series`` {data, model: {time_s, kappa,
         nutation_rad_s, space_fixed_rad_s, constant_rad_s, spin_rad_s} (m,) each}, ``torque_free_kappa``
         ((Ia − Id)/Id), ``mismatch`` (list of ``kappa``, ``decay_early``, ``decay_late``, ``amplitude``),
-        ``method`` and its ``window_s``, ``step_s``.
+        ``beat`` {data, model: :func:`~.wobble_beat.late_beat` record or None} (the late span as a beat of a
+        nutation locked to the spin and a free one), ``method`` and its ``window_s``, ``step_s``.
     """
     td, tm = wobble_track(t, measured), wobble_track(t, predicted)
     data, model = wobble_summary(td), wobble_summary(tm)
+    beat = {who: late_beat(t, g, spin_phase(t, np.asarray(g, float)[:, 2]))
+            for who, g in (("data", measured), ("model", predicted))}
     return {"data": data, "model": model, "series": {"data": _series(td), "model": _series(tm)},
-            "torque_free_kappa": float(rigid_kappa(Ia, Id, 1.0)), "mismatch": _mismatch(data, model),
+            "torque_free_kappa": float(rigid_kappa(Ia, Id, 1.0)), "mismatch": _mismatch(data, model), "beat": beat,
             "window_s": WINDOW_S, "step_s": STEP_S,
             "method": "local least-squares fit of N e^{iκΔφ} + S e^{−iΔφ} + K to g_x + i g_y in sliding windows, "
                       "φ the spin phase integrated from g_z"}
@@ -424,15 +428,17 @@ def wobble_words(name: str, rec: dict) -> str:
                      f"{_decay_text('the model’s', m['decay_per_s']['late'])}")
     if "amplitude" in mis:
         parts.append(f"early nutation amplitude {dn:.2f} rad/s in the data, {mn:.2f} rad/s in the model")
+    beat = beat_words(*(rec.get("beat", {}).get(who) for who in ("data", "model")))
+    beat = " " + beat if beat else ""
     if not parts:
         a, b = _spans(d)
         return (f"Wobble of throw {name}: the model's wobble matches the data's (κ {_k(d['kappa'][a])} {a}, "
                 f"{_k(d['kappa'][b])} {b}; {_decay_text('it', d['decay_per_s']['early'])} early; nutation "
-                f"{_k(dn)} rad/s early).")
+                f"{_k(dn)} rad/s early)." + beat)
     fixed = d["constant_rad_s"][_spans(d)[0]]
     tail = (f" Precession (space-fixed) {_k(d['space_fixed_rad_s'][_spans(d)[0]])} rad/s; sensor-fixed part "
             f"{_k(fixed)} rad/s ({d['constant_tilt_deg']:.2f}° × spin)." if fixed is not None else "")
-    return f"Wobble of throw {name}: " + "; ".join(parts) + "." + tail
+    return f"Wobble of throw {name}: " + "; ".join(parts) + "." + tail + beat
 
 
 def inertial_gyro(problem, theta: np.ndarray, k: int):
