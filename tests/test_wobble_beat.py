@@ -92,7 +92,8 @@ def test_words_say_the_model_lacks_the_free_wobble():
     text = beat_words(d, m)
     assert f"κ {d['kappa_free']:.3f}" in text and f"every {d['beat_period_s']:.1f} s" in text
     assert "lacks the free wobble" in text and "no free wobble" in text
-    assert text in wobble_words("T", rec)
+    assert "free_late" in rec["mismatch"]
+    assert text in wobble_words("T", rec) and "matches" not in wobble_words("T", rec)
 
 
 def test_words_do_not_name_a_missing_free_wobble_when_the_model_has_it():
@@ -100,3 +101,26 @@ def test_words_do_not_name_a_missing_free_wobble_when_the_model_has_it():
     _, model = beat_gyro(noise=0.0, seed=2)
     rec = throw_wobble(t, data, model, Ia=Disc().Ia, Id=Disc().Id)
     assert "lacks" not in beat_words(rec["beat"]["data"], rec["beat"]["model"])
+    assert "free_late" not in rec["mismatch"]
+
+
+def test_simulated_disc_asymmetry_is_a_beat_of_forced_and_free_nutation():
+    """A disc with an aerodynamic asymmetry (no other aerodynamics, almost no gravity: Q and r constant),
+    released without wobble: W = a e^{irt} + b e^{iκ₀rt} with b = −a and a = C Q A d / (i Id (1 − κ₀) r)
+    (tests/test_wobble_terms.py). Its late span is a beat of a locked nutation of |a| and a free one of |a| at
+    κ₀, neither decaying, every 2π/((1 − κ₀) r)."""
+    from bayes_disc.physics import Environment, get_terms, simulate
+    from test_wobble_terms import ZERO, _state
+    disc, env, r, V, c = Disc(), Environment(g=1e-9), 60.0, 13.0, 0.004 + 0.003j
+    times = np.arange(0.0, 3.0, PERIOD)
+    tr = simulate(_state(pqr=(0.0, 0.0, r), tilt=(0.0, 0.0), speed=V), ZERO.as_array(), times, env=env,
+                  terms=get_terms(["disc_asymmetry"]), extension=np.array([c.real, c.imag]))
+    gyro = tr.states[0][:, 10:13]
+    kappa = disc.Ia / disc.Id - 1
+    a = abs(c) * 0.5 * env.rho * (V ** 2 + 1.0) * disc.area * disc.diameter / (disc.Id * (1 - kappa) * r)
+    rec = late_beat(times, gyro, spin_phase(times, gyro[:, 2]))
+    assert rec["kappa_free"] == pytest.approx(kappa, abs=0.001)
+    assert rec["locked_rad_s"] == pytest.approx(a, rel=0.02) and rec["free_rad_s"] == pytest.approx(a, rel=0.02)
+    assert abs(rec["locked_decay_per_s"]) < 0.02 and abs(rec["free_decay_per_s"]) < 0.02
+    assert rec["beat_period_s"] == pytest.approx(2 * np.pi / ((1 - kappa) * r), rel=0.01)
+    assert rec["rms_rad_s"] < 0.02 * a

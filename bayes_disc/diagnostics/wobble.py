@@ -40,9 +40,13 @@ Overlapping windows of constant length scale an exponential's amplitude by a con
 is unbiased. κ and the amplitudes per span (``KAPPA_SPANS``) are the medians over the window centres in it.
 The tilt equivalent of the sensor-fixed part is |K| / |r| [rad] (bias included).
 
+Over the late span the windows' one nutation can be two: :mod:`.wobble_beat` fits the span at once with a
+nutation locked to the spin and a free one (a beat), for data and model alike (``beat`` in the record).
+
 The comparison of data and model (:func:`wobble_words`) names a κ mismatch when the spans' κ differ by more
 than ``KAPPA_TOL``, a decay mismatch when the decay rates differ by more than ``DECAY_TOL`` [1/s], and an
-amplitude mismatch when the early nutation amplitudes differ by more than the factor ``AMPLITUDE_RATIO``.
+amplitude mismatch when the early nutation amplitudes differ by more than the factor ``AMPLITUDE_RATIO``, and
+a missing late free nutation (:func:`.wobble_beat.free_missing`).
 """
 from __future__ import annotations
 
@@ -52,7 +56,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from ..physics import axial_inertia
-from .wobble_beat import beat_words, late_beat
+from .wobble_beat import beat_words, free_missing, late_beat
 
 __all__ = ["WobbleTrack", "decay_rate", "phasor_fit", "rigid_kappa", "rigid_nutation", "spin_phase", "throw_wobble",
            "wobble_summary", "wobble_track", "wobble_words"]
@@ -311,7 +315,7 @@ def _series(track: WobbleTrack) -> dict:
             "spin_rad_s": track.spin}
 
 
-def _mismatch(data: dict, model: dict) -> list[str]:
+def _mismatch(data: dict, model: dict, beat: dict) -> list[str]:
     out = []
     if any(data["kappa"][s] is not None and model["kappa"][s] is not None
            and abs(data["kappa"][s] - model["kappa"][s]) > KAPPA_TOL for s in KAPPA_SPANS):
@@ -323,6 +327,8 @@ def _mismatch(data: dict, model: dict) -> list[str]:
     a, b = data["nutation_rad_s"]["early"], model["nutation_rad_s"]["early"]
     if a and b and max(a / b, b / a) > AMPLITUDE_RATIO:
         out.append("amplitude")
+    if free_missing(beat["data"], beat["model"]):
+        out.append("free_late")
     return out
 
 
@@ -344,8 +350,8 @@ def throw_wobble(t: np.ndarray, measured: np.ndarray, predicted: np.ndarray, Ia:
     dict
         ``data``, ``model`` (:func:`wobble_summary`), ``series`` {data, model: {time_s, kappa,
         nutation_rad_s, space_fixed_rad_s, constant_rad_s, spin_rad_s} (m,) each}, ``torque_free_kappa``
-        ((Ia − Id)/Id), ``mismatch`` (list of ``kappa``, ``decay_early``, ``decay_late``, ``amplitude``),
-        ``beat`` {data, model: :func:`~.wobble_beat.late_beat` record or None} (the late span as a beat of a
+        ((Ia − Id)/Id), ``mismatch`` (list of ``kappa``, ``decay_early``, ``decay_late``, ``amplitude``,
+        ``free_late``: the data's late free nutation missing from the model), ``beat`` {data, model: :func:`~.wobble_beat.late_beat` record or None} (the late span as a beat of a
         nutation locked to the spin and a free one), ``method`` and its ``window_s``, ``step_s``.
     """
     td, tm = wobble_track(t, measured), wobble_track(t, predicted)
@@ -353,7 +359,7 @@ def throw_wobble(t: np.ndarray, measured: np.ndarray, predicted: np.ndarray, Ia:
     beat = {who: late_beat(t, g, spin_phase(t, np.asarray(g, float)[:, 2]))
             for who, g in (("data", measured), ("model", predicted))}
     return {"data": data, "model": model, "series": {"data": _series(td), "model": _series(tm)},
-            "torque_free_kappa": float(rigid_kappa(Ia, Id, 1.0)), "mismatch": _mismatch(data, model), "beat": beat,
+            "torque_free_kappa": float(rigid_kappa(Ia, Id, 1.0)), "mismatch": _mismatch(data, model, beat), "beat": beat,
             "window_s": WINDOW_S, "step_s": STEP_S,
             "method": "local least-squares fit of N e^{iκΔφ} + S e^{−iΔφ} + K to g_x + i g_y in sliding windows, "
                       "φ the spin phase integrated from g_z"}
@@ -430,7 +436,7 @@ def wobble_words(name: str, rec: dict) -> str:
         parts.append(f"early nutation amplitude {dn:.2f} rad/s in the data, {mn:.2f} rad/s in the model")
     beat = beat_words(*(rec.get("beat", {}).get(who) for who in ("data", "model")))
     beat = " " + beat if beat else ""
-    if not parts:
+    if not parts and "free_late" not in mis:
         a, b = _spans(d)
         return (f"Wobble of throw {name}: the model's wobble matches the data's (κ {_k(d['kappa'][a])} {a}, "
                 f"{_k(d['kappa'][b])} {b}; {_decay_text('it', d['decay_per_s']['early'])} early; nutation "
@@ -438,7 +444,7 @@ def wobble_words(name: str, rec: dict) -> str:
     fixed = d["constant_rad_s"][_spans(d)[0]]
     tail = (f" Precession (space-fixed) {_k(d['space_fixed_rad_s'][_spans(d)[0]])} rad/s; sensor-fixed part "
             f"{_k(fixed)} rad/s ({d['constant_tilt_deg']:.2f}° × spin)." if fixed is not None else "")
-    return f"Wobble of throw {name}: " + "; ".join(parts) + "." + tail + beat
+    return f"Wobble of throw {name}: " + ("; ".join(parts) + "." if parts else "") + tail + beat
 
 
 def inertial_gyro(problem, theta: np.ndarray, k: int):

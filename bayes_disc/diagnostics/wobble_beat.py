@@ -36,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import minimize
 
-__all__ = ["beat_fit", "beat_words", "late_beat"]
+__all__ = ["beat_fit", "beat_words", "free_missing", "late_beat"]
 
 #: the late span starts this long after release [s] (after the release wobble's fast early decay)
 START_S = 1.0
@@ -161,6 +161,14 @@ def _part(rec: dict) -> str:
     return f"{locked} and {free}"
 
 
+def free_missing(data: dict | None, model: dict | None) -> bool:
+    """Whether the data's late free nutation is resolved and the model's is not, or is below ``MISSING_RATIO``
+    of it (:func:`late_beat` records; False when the data's late span was not fitted)."""
+    if data is None or not data["free_resolved"]:
+        return False
+    return model is None or not model["free_resolved"] or model["free_rad_s"] < MISSING_RATIO * data["free_rad_s"]
+
+
 def beat_words(data: dict | None, model: dict | None) -> str:
     """The late beat of data and model in one sentence, '' when the data's late span was not fitted.
 
@@ -187,6 +195,6 @@ def beat_words(data: dict | None, model: dict | None) -> str:
     if model is None:
         return text + "."
     text += f"; the model's is {_part(model)}"
-    if not model["free_resolved"] or model["free_rad_s"] < MISSING_RATIO * data["free_rad_s"]:
+    if free_missing(data, model):
         return text + ": the model lacks the free wobble late (its free nutation has decayed or turns at the spin)."
     return text + "."

@@ -476,14 +476,15 @@ def learned_curve_figure(curve: dict, generating: np.ndarray | None = None, gene
 def wobble_figure(records: dict) -> Figure:
     """The wobble of each throw (one column per throw), data (dots) against model (line): κ, the nutation
     rate over the spin [1], with the model's torque-free rigid disc's (Ia − Id)/Id dashed (Ia (1 + ε_I) with a
-    fitted inertia ratio) (top); the amplitudes of the nutation (log scale), of the space-fixed part and of the
+    fitted inertia ratio) and, dotted over the late span, the free nutation's κ_F of the late beat where it is
+    resolved (top); the amplitudes of the nutation (log scale), of the space-fixed part and of the
     sensor-fixed part [rad/s] (bottom).
 
     Parameters
     ----------
     records : dict
         ``diagnosis.json``'s ``wobble``: {throw: {series: {data, model: {time_s, kappa, nutation_rad_s,
-        space_fixed_rad_s, constant_rad_s} (m,) lists}, torque_free_kappa}}.
+        space_fixed_rad_s, constant_rad_s} (m,) lists}, torque_free_kappa, beat (optional)}}.
     """
     n = len(records)
     fig = new_figure(max(6.0, 3.6 * n), 5.6)
@@ -501,6 +502,11 @@ def wobble_figure(records: dict) -> Figure:
                             label=f"{who} {lab}" if c == 0 else None)
         top.axhline(rec["torque_free_kappa"], color="0.5", ls="--", lw=0.8,
                     label="torque-free (Ia − Id)/Id" if c == 0 else None)
+        for who, colour in (("data", "tab:blue"), ("model", "k")):
+            b = (rec.get("beat") or {}).get(who)
+            if b and b["free_resolved"]:
+                top.hlines(b["kappa_free"], *b["span_s"], color=colour, ls=":", lw=1.6,
+                           label=f"{who}: late free nutation κ_F (beat)" if c == 0 else None)
         bottom.set_yscale("log")
         top.set_title(name, fontsize=10)
         bottom.set_xlabel("window centre, time since release [s]", fontsize=8)

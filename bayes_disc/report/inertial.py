@@ -98,8 +98,9 @@ def inertial_section(ctx) -> Section | None:
                             "The wobble of each throw, from diagnosis.json: the transverse gyro rates g_x + i g_y fitted "
                             f"in sliding {window['window_s']:.2f} s windows by a nutation phasor turning at κ × spin in "
                             "the body, a space-fixed (precession) phasor and a part fixed in sensor axes. Top: κ of the "
-                            "data (dots) and of the model (line), the torque-free rigid disc's (Ia − Id)/Id dashed; "
-                            "bottom: the three amplitudes. "
+                            "data (dots) and of the model (line), the torque-free rigid disc's (Ia − Id)/Id dashed, "
+                            "and dotted over the late span the free nutation's κ_F where the late wobble is a beat of "
+                            "it and a nutation locked to the spin; bottom: the three amplitudes. "
                             + " ".join(r["words"] for r in wobble.values())))
     rows = [_param_row(p, "imu_offset_x", "sensor position r_s, b1", 1e3, "mm"),
             _param_row(p, "imu_offset_y", "sensor position r_s, b2", 1e3, "mm"),
