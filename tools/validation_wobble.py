@@ -109,7 +109,7 @@ def section_real_wobble() -> list[str]:
               f"(ΔBIC {dbic:.0f}); the transverse gyro misfit is {fmt(min(gyro))}–{fmt(max(gyro))} rad/s, "
               + (f"within {GYRO_TARGET} rad/s on every throw" if max(gyro) <= GYRO_TARGET else
                  f"**above {GYRO_TARGET} rad/s on {sum(g > GYRO_TARGET for g in gyro)} of {len(gyro)} throws**")
-              + f"; {acc_text}; {loo_verdict()}. "
+              + f"; {acc_text}; {beat_verdict(diag)}; {loo_verdict()}. "
               "The release speed is not settled by these fits: the start search of each run ends where it ends, "
               "and other optima of nearly the same misfit lie at other speeds "
               "([inertial recordings](inertial.md#measurement-model)). The aerodynamic coefficients of these fits "
@@ -187,6 +187,16 @@ def real_wobble(diag: dict) -> list[str]:
     L += table(["throw", "κ data, early → middle → late", "κ model", "decay data, early / late [1/s]",
                 "decay model [1/s]"], rows)
     return L + _late_beat(wob)
+
+
+def beat_verdict(diag: dict) -> str:
+    """'late, the data's free nutation is missing from the model on 3 of 3 throws' (``wobble`` → ``mismatch``)."""
+    wob = diag.get("wobble") or {}
+    missing = sum("free_late" in r["mismatch"] for r in wob.values())
+    fitted = sum(bool((r.get("beat") or {}).get("data")) for r in wob.values())
+    return (f"late in the flight the data's free nutation is **missing from the model on {missing} of {fitted} "
+            "throws**" if missing else f"late in the flight the model carries the data's free nutation on "
+            f"every one of {fitted} throws")
 
 
 def _beat_cells(b: dict | None) -> list[str]:
