@@ -35,8 +35,8 @@ def _at_centre(amplitude, decay, rec):
 
 @pytest.mark.parametrize("spin0", [58.0, -58.0])
 def test_known_beat_recovered(spin0):
-    """κ_F within 0.002 (a 2.5 s span turns ≈ 140 rad of spin phase: σ_κ ≈ 0.1/(0.4 × 140 × √200) ≈ 1e-4), the
-    amplitudes at the span's centre within 0.03 rad/s, the decay rates within 0.15 /s, both nutations
+    """κ_F within 0.002 (a 2.5 s span turns ≈ 140 rad of spin phase: σ_κ ≈ 0.1/(0.4 × 140 × √200) ≈ 1e-4),
+    the amplitudes at the span's centre within 0.03 rad/s, the decay rates within 0.15 /s, both nutations
     resolved, the RMS left at the noise (0.1 rad/s per component) and the beat period 2π/((1 − κ_F)|r̄|)."""
     t, g = beat_gyro(spin0=spin0, free_decay=-0.2)
     rec = late_beat(t, g, spin_phase(t, g[:, 2]))

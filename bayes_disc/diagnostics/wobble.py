@@ -351,15 +351,17 @@ def throw_wobble(t: np.ndarray, measured: np.ndarray, predicted: np.ndarray, Ia:
         ``data``, ``model`` (:func:`wobble_summary`), ``series`` {data, model: {time_s, kappa,
         nutation_rad_s, space_fixed_rad_s, constant_rad_s, spin_rad_s} (m,) each}, ``torque_free_kappa``
         ((Ia − Id)/Id), ``mismatch`` (list of ``kappa``, ``decay_early``, ``decay_late``, ``amplitude``,
-        ``free_late``: the data's late free nutation missing from the model), ``beat`` {data, model: :func:`~.wobble_beat.late_beat` record or None} (the late span as a beat of a
-        nutation locked to the spin and a free one), ``method`` and its ``window_s``, ``step_s``.
+        ``free_late``: the data's late free nutation missing from the model), ``beat`` {data, model:
+        :func:`~.wobble_beat.late_beat` record or None} (the late span as a beat of a nutation locked to the spin
+        and a free one), ``method`` and its ``window_s``, ``step_s``.
     """
     td, tm = wobble_track(t, measured), wobble_track(t, predicted)
     data, model = wobble_summary(td), wobble_summary(tm)
     beat = {who: late_beat(t, g, spin_phase(t, np.asarray(g, float)[:, 2]))
             for who, g in (("data", measured), ("model", predicted))}
     return {"data": data, "model": model, "series": {"data": _series(td), "model": _series(tm)},
-            "torque_free_kappa": float(rigid_kappa(Ia, Id, 1.0)), "mismatch": _mismatch(data, model, beat), "beat": beat,
+            "torque_free_kappa": float(rigid_kappa(Ia, Id, 1.0)), "mismatch": _mismatch(data, model, beat),
+            "beat": beat,
             "window_s": WINDOW_S, "step_s": STEP_S,
             "method": "local least-squares fit of N e^{iκΔφ} + S e^{−iΔφ} + K to g_x + i g_y in sliding windows, "
                       "φ the spin phase integrated from g_z"}

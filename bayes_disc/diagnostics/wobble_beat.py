@@ -84,10 +84,11 @@ def beat_fit(t: np.ndarray, z: np.ndarray, phi: np.ndarray, spin: float) -> dict
     -------
     dict or None
         ``kappa_free`` [1], ``free_rad_s``, ``locked_rad_s``, ``constant_rad_s`` (|F|, |L|, |K| at the span's
-        centre) [rad/s], ``free_decay_per_s``, ``locked_decay_per_s`` [1/s], ``free_resolved`` (bool),
-        ``locked_resolved`` (bool), ``beat_period_s`` [s], ``rms_rad_s`` (left by the three phasors), ``rms_locked_only_rad_s`` (left by K
-        and L alone), ``free_share`` (1 − RSS₃/RSS₂), ``span_s`` [t₀, t₁]; None when the span is too short for
-        half a beat at ``KAPPA_MIN``.
+        centre) [rad/s], ``free_decay_per_s``, ``locked_decay_per_s`` [1/s], ``free_resolved``,
+        ``locked_resolved`` (bool), ``beat_period_s`` [s], ``rms_rad_s`` (left by the three phasors) and
+        ``rms_locked_only_rad_s`` (left by K and L alone, at the same λ_L) [rad/s], ``free_share``
+        (1 − RSS₃/RSS₂), ``span_s`` [t₀, t₁] [s]; None when the span is too short for half a beat at
+        ``KAPPA_MIN``.
     """
     n = z.size
     span = float(t[-1] - t[0])
@@ -140,12 +141,12 @@ def late_beat(t: np.ndarray, gyro: np.ndarray, phi: np.ndarray, start: float = S
     dict or None
         :func:`beat_fit`'s record; None when fewer than ``MIN_SPAN_S`` of flight follow ``start``.
     """
-    g = np.asarray(gyro, float)
+    t, g, phi = np.asarray(t, float), np.asarray(gyro, float), np.asarray(phi, float)
     z = g[:, 0] + 1j * g[:, 1]
-    m = (np.asarray(t) >= start) & np.isfinite(z) & np.isfinite(phi)
+    m = (t >= start) & np.isfinite(z) & np.isfinite(phi)
     if not m.any() or t[m][-1] - t[m][0] < MIN_SPAN_S:
         return None
-    return beat_fit(np.asarray(t, float)[m], z[m], np.asarray(phi, float)[m], float(np.nanmean(g[m, 2])))
+    return beat_fit(t[m], z[m], phi[m], float(np.nanmean(g[m, 2])))
 
 
 def _decay(x: float) -> str:
@@ -154,10 +155,10 @@ def _decay(x: float) -> str:
 
 def _part(rec: dict) -> str:
     """'a wobble locked to the spin (κ 1) of 0.37 rad/s decaying at 0.5 /s and a free wobble at κ 0.946 …'."""
-    locked = (f"a wobble locked to the spin (κ 1) of {rec['locked_rad_s']:.2f} rad/s {_decay(rec['locked_decay_per_s'])}"
-              if rec["locked_resolved"] else "no wobble locked to the spin")
-    free = (f"a free wobble at κ {rec['kappa_free']:.3f} of {rec['free_rad_s']:.2f} rad/s {_decay(rec['free_decay_per_s'])}"
-            if rec["free_resolved"] else "no free wobble")
+    locked = (f"a wobble locked to the spin (κ 1) of {rec['locked_rad_s']:.2f} rad/s "
+              f"{_decay(rec['locked_decay_per_s'])}" if rec["locked_resolved"] else "no wobble locked to the spin")
+    free = (f"a free wobble at κ {rec['kappa_free']:.3f} of {rec['free_rad_s']:.2f} rad/s "
+            f"{_decay(rec['free_decay_per_s'])}" if rec["free_resolved"] else "no free wobble")
     return f"{locked} and {free}"
 
 
