@@ -190,7 +190,8 @@ def real_wobble(diag: dict) -> list[str]:
 
 
 def beat_verdict(diag: dict) -> str:
-    """'late, the data's free nutation is missing from the model on 3 of 3 throws' (``wobble`` → ``mismatch``)."""
+    """'late in the flight the data's free nutation is missing from the model on 3 of 3 throws' (``wobble`` →
+    ``mismatch`` → ``free_late``), or that the model carries it on every throw."""
     wob = diag.get("wobble") or {}
     missing = sum("free_late" in r["mismatch"] for r in wob.values())
     fitted = sum(bool((r.get("beat") or {}).get("data")) for r in wob.values())

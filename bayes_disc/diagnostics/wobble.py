@@ -56,7 +56,7 @@ import numpy as np
 from scipy.optimize import minimize_scalar
 
 from ..physics import axial_inertia
-from .wobble_beat import beat_words, free_missing, late_beat
+from .wobble_beat import beat_words, free_missing, late_beat, phasor_solve, resolved
 
 __all__ = ["WobbleTrack", "decay_rate", "phasor_fit", "rigid_kappa", "rigid_nutation", "spin_phase", "throw_wobble",
            "wobble_summary", "wobble_track", "wobble_words"]
@@ -66,9 +66,6 @@ WINDOW_S = 0.25
 STEP_S = 0.05
 #: fewest finite samples a window needs
 MIN_SAMPLES = 8
-#: a window's κ counts only where |N| exceeds this many standard errors of the fit and ``NUTATION_MIN`` [rad/s]
-NUTATION_SNR = 5.0
-NUTATION_MIN = 0.02
 #: κ searched (dimensionless) and the grid step before refinement
 KAPPA_BOUNDS = (0.3, 1.6)
 KAPPA_STEP = 0.01
@@ -120,10 +117,7 @@ def phasor_fit(z: np.ndarray, dphi: np.ndarray, kappa: float) -> tuple[np.ndarra
     ((3,) complex array, float)
         (N, S, K) [rad/s] and the residual sum of squares [rad²/s²].
     """
-    A = np.stack([np.exp(1j * kappa * dphi), np.exp(-1j * dphi), np.ones_like(dphi)], axis=1)
-    c, *_ = np.linalg.lstsq(A, z, rcond=None)
-    res = z - A @ c
-    return c, float(np.real(np.vdot(res, res)))
+    return phasor_solve(np.stack([np.exp(1j * kappa * dphi), np.exp(-1j * dphi), np.ones_like(dphi)], axis=1), z)
 
 
 def _window(z: np.ndarray, dphi: np.ndarray) -> tuple[float, np.ndarray]:
@@ -137,9 +131,7 @@ def _window(z: np.ndarray, dphi: np.ndarray) -> tuple[float, np.ndarray]:
                            options={"xatol": 1e-5})
     kappa = float(best.x) if best.fun <= ss[j] else float(grid[j])
     c, rss = phasor_fit(z, dphi, kappa)
-    se = np.sqrt(rss / max(z.size - 6, 1) / z.size)
-    resolved = abs(c[0]) >= max(NUTATION_SNR * se, NUTATION_MIN)
-    return (kappa if resolved else float("nan")), c
+    return (kappa if resolved(abs(c[0]), rss, z.size, 6) else float("nan")), c
 
 
 @dataclass
@@ -152,7 +144,8 @@ class WobbleTrack:
         Window centres [s] since release.
     kappa : (m,) array
         Nutation rate over spin rate [1]; NaN where the nutation is not resolved (|N| below
-        ``NUTATION_SNR`` standard errors √(RSS/(n − 6)/n) or below ``NUTATION_MIN``).
+        :data:`~.wobble_beat.NUTATION_SNR` standard errors √(RSS/(n − 6)/n) or below
+        :data:`~.wobble_beat.NUTATION_MIN`: :func:`~.wobble_beat.resolved`).
     nutation, space_fixed, constant : (m,) complex arrays
         N, S, K [rad/s] (phases at the window centre).
     spin : (m,) array

@@ -36,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import minimize
 
-__all__ = ["beat_fit", "beat_words", "free_missing", "late_beat"]
+__all__ = ["beat_fit", "beat_words", "free_missing", "late_beat", "phasor_solve", "resolved"]
 
 #: the late span starts this long after release [s] (after the release wobble's fast early decay)
 START_S = 1.0
@@ -47,7 +47,8 @@ KAPPA_MIN = 0.7
 KAPPA_STEP = 0.0025
 #: decay rates λ_L, λ_F are bounded to ±DECAY_BOUND [1/s]
 DECAY_BOUND = 3.0
-#: the free nutation is resolved above this many standard errors and above NUTATION_MIN [rad/s]
+#: a nutation is resolved above this many standard errors of its fit and above NUTATION_MIN [rad/s] (the rule of
+#: the sliding windows of :mod:`.wobble` and of the late span's fit alike: :func:`resolved`)
 NUTATION_SNR = 5.0
 NUTATION_MIN = 0.02
 #: a free nutation of the data is missing from the model when the model's is below this fraction of it
@@ -60,10 +61,18 @@ def _design(dphi: np.ndarray, tau: np.ndarray, kappa: float, lam_l: float, lam_f
                      np.exp(1j * kappa * dphi - lam_f * tau)], axis=1)
 
 
-def _solve(z: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, float]:
+def phasor_solve(A: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, float]:
+    """Complex amplitudes c of z ≈ A c by linear least squares and the residual sum of squares [rad²/s²]."""
     c, *_ = np.linalg.lstsq(A, z, rcond=None)
     res = z - A @ c
     return c, float(np.real(np.vdot(res, res)))
+
+
+def resolved(amplitude: float, rss: float, n: int, n_params: int) -> bool:
+    """Whether a fitted phasor's amplitude [rad/s] exceeds ``NUTATION_SNR`` standard errors √(RSS/(n − k)/n) of a
+    fit of n complex samples with k real parameters, and ``NUTATION_MIN``."""
+    se = np.sqrt(rss / max(n - n_params, 1) / n)
+    return bool(amplitude >= max(NUTATION_SNR * se, NUTATION_MIN))
 
 
 def beat_fit(t: np.ndarray, z: np.ndarray, phi: np.ndarray, spin: float) -> dict | None:
@@ -100,23 +109,21 @@ def beat_fit(t: np.ndarray, z: np.ndarray, phi: np.ndarray, spin: float) -> dict
     tau = t - tc
     zs = z if spin > 0 else np.conj(z)         # turning in the spin's sense: positive κ either way
     grid = np.arange(KAPPA_MIN, kappa_max, KAPPA_STEP)
-    ss = [_solve(zs, _design(dphi, tau, k, 0.0, 0.0))[1] for k in grid]
+    ss = [phasor_solve(_design(dphi, tau, k, 0.0, 0.0), zs)[1] for k in grid]
     x0 = np.array([grid[int(np.argmin(ss))], 0.0, 0.0])
     lo, hi = np.array([KAPPA_MIN, -DECAY_BOUND, -DECAY_BOUND]), np.array([kappa_max, DECAY_BOUND, DECAY_BOUND])
 
     def cost(x):
-        return _solve(zs, _design(dphi, tau, *np.clip(x, lo, hi)))[1]
+        return phasor_solve(_design(dphi, tau, *np.clip(x, lo, hi)), zs)[1]
 
     best = minimize(cost, x0, method="Nelder-Mead", options={"xatol": 1e-5, "fatol": 1e-10, "maxiter": 2000})
     x = np.clip(best.x, lo, hi) if best.fun <= cost(x0) else x0
-    c, rss = _solve(zs, _design(dphi, tau, *x))
-    _, rss2 = _solve(zs, _design(dphi, tau, 1.0, x[1], 0.0)[:, :2])
-    se = np.sqrt(rss / max(n - 9, 1) / n)
+    c, rss = phasor_solve(_design(dphi, tau, *x), zs)
+    _, rss2 = phasor_solve(_design(dphi, tau, 1.0, x[1], 0.0)[:, :2], zs)
     kappa = float(x[0])
     return {"kappa_free": kappa, "free_rad_s": float(abs(c[2])), "locked_rad_s": float(abs(c[1])),
             "constant_rad_s": float(abs(c[0])), "free_decay_per_s": float(x[2]), "locked_decay_per_s": float(x[1]),
-            "free_resolved": bool(abs(c[2]) >= max(NUTATION_SNR * se, NUTATION_MIN)),
-            "locked_resolved": bool(abs(c[1]) >= max(NUTATION_SNR * se, NUTATION_MIN)),
+            "free_resolved": resolved(abs(c[2]), rss, n, 9), "locked_resolved": resolved(abs(c[1]), rss, n, 9),
             "beat_period_s": float(2 * np.pi / ((1 - kappa) * abs(spin))),
             "rms_rad_s": float(np.sqrt(rss / (2 * n))), "rms_locked_only_rad_s": float(np.sqrt(rss2 / (2 * n))),
             "free_share": float(1.0 - rss / rss2) if rss2 > 0 else 0.0, "span_s": [float(t[0]), float(t[-1])]}
