@@ -2,8 +2,9 @@
 logger's barometer (runs/flatball/barometer/) and with the barometer and three wobble terms
 (runs/flatball/wobble/), compared group by group. Reads the two runs' least_squares.json and
 identifiability.json, the wobble run's diagnosis.json (its wobble and the further candidates), its
-leave-one-throw-out folds (runs/flatball/wobble/loo/<throw>/: out_fit/least_squares.json, out_held/prediction.json)
-and the magnetometer's own row periods from runs/flatball/out/summary.json."""
+leave-one-throw-out folds (runs/flatball/wobble/loo/<throw>/: out_fit/least_squares.json, out_held/prediction.json),
+the magnetometer's own row periods from runs/flatball/out/summary.json, and the same throws refitted with their rows
+placed by the magnetometer (runs/flatball/wobble/row_times.json, tools/row_times_refit.py)."""
 from __future__ import annotations
 
 import math
@@ -13,6 +14,7 @@ from validation_common import PREDICTION_HEADER, fmt, fold_names, load, predicti
 BASE = "runs/flatball/barometer/out"
 WOBBLE = "runs/flatball/wobble/out"
 LOO = "runs/flatball/wobble/loo"
+ROW_TIMES = "runs/flatball/wobble/row_times.json"
 #: the held-out RMS (coefficients fixed) a model should reach, as a multiple of a free fit's, in every fold
 LOO_TARGET = 1.3
 #: the coefficients and term parameters whose fold-to-fold spread the section shows
@@ -86,6 +88,7 @@ def section_real_wobble() -> list[str]:
               f"barometer alone, {fmt(pw['baro_lag']['value'])} s with the terms.", ""]
     L += table(["throw", "release speed, barometer [m/s]", "release speed, with the terms [m/s]",
                 "row period with the terms [ms]", "magnetometer's own period [ms]", "difference"], srow)
+    L += row_times_block(throws)
     diag = load(f"{WOBBLE}/diagnosis.json")
     L += real_wobble(diag)
     cands = sorted(diag["candidates"], key=lambda c: -c["evidence"])
@@ -122,6 +125,52 @@ def section_real_wobble() -> list[str]:
           f"identifiability {LOO}/<throw>/fit.yaml --no-design --overwrite` then, in `{LOO}`, `bayes-disc predict "
           "<throw>/held.yaml --from <throw>/out_fit --overwrite` (`--overwrite` replaces the committed results).",
           ""]
+    return L
+
+
+def _worse_groups(fit: dict, ref: dict, throws: list[str]) -> str:
+    """The groups (all but the magnetometer's transverse one) whose RMS in ``fit`` exceeds ``ref``'s by more
+    than ACC_TOLERANCE, in words."""
+    keys = [k for k in ref["noise"] if not k.startswith("sigma_mag_transverse")
+            and fit["noise"][k]["value"] > ref["noise"][k]["value"] * (1 + ACC_TOLERANCE)]
+    if not keys:
+        return f"no group other than the magnetometer's transverse one more than {100 * ACC_TOLERANCE:.0f} % worse"
+    return (f"{len(keys)} group(s) more than {100 * ACC_TOLERANCE:.0f} % worse: "
+            + ", ".join("{} of {}".format(*split_group(k, throws)).replace("2025-08-31-", "") for k in keys))
+
+
+def row_times_block(throws: list[str]) -> list[str]:
+    """Rows equally spaced against rows placed by the magnetometer (``row_times.json``): where the magnetometer
+    puts the rows, both placements refitted alike from the run's optimum, and where the run's own start search
+    ends with the magnetometer's rows."""
+    rt = load(ROW_TIMES)
+    uni, mag, own = rt["refit"]["uniform"], rt["refit"]["magnetometer"], rt["run_starts"]
+    prow = [[t, f"{r['mean_period_s'] * 1e3:.2f}",
+             f"{r['shortest_step_s'] * 1e3:.1f}–{r['longest_step_s'] * 1e3:.1f}",
+             f"{r['deviation_max_rows'] * r['mean_period_s'] * 1e3:.0f}"] for t, r in rt["rows"].items()]
+    rows = []
+    for g in dict.fromkeys(split_group(n, throws)[0] for n in uni["noise"]):
+        keys = [f"sigma_{g}_{t}" for t in throws]
+        rows.append([g, uni["noise"][keys[0]]["unit"],
+                     *(f"{fmt(uni['noise'][k]['value'])} → {fmt(mag['noise'][k]['value'])}; "
+                       f"{fmt(own['noise'][k]['value'])}" for k in keys)])
+    gain = uni["sum_n_ln_sigma_without_mag"] - mag["sum_n_ln_sigma_without_mag"]
+    gain_own = uni["sum_n_ln_sigma_without_mag"] - own["sum_n_ln_sigma_without_mag"]
+    L = ["", "Rows placed in time by the magnetometer (`row_times: magnetometer`, "
+             "`runs/flatball/wobble/row_times.json`, made by `python tools/row_times_refit.py`): each row where the "
+             "field's phase puts it. Per throw, the mean row period, the shortest and longest time between two rows "
+             "and the largest distance of a row from equally spaced rows [ms]:", ""]
+    L += table(["throw", "mean row period [ms]", "time between rows [ms]", "largest shift [ms]"], prow)
+    L += ["", "The same throws, model and terms, the rows equally spaced → placed by the magnetometer, both "
+              "refitted alike from this run's optimum (initial conditions, then everything); after the semicolon, "
+              "the run's own least squares from its starts with the placed rows. RMS per group:", ""]
+    L += table(["group", "unit", *(f"{t[-6:]}: equally spaced → placed; own starts" for t in throws)], rows)
+    other = (f": the start search ends in another optimum, {gain - gain_own:.0f} higher"
+             if gain - gain_own > EVIDENCE_THRESHOLD else "")
+    L += ["", f"Σ n ln σ over the gyroscope, accelerometer and barometer groups (the magnetometer places the rows, "
+              f"so its own misfit is no independent check) is {gain:.0f} lower with the placed rows refitted from the "
+              f"run's optimum ({_worse_groups(mag, uni, throws)}), and {gain_own:.0f} lower from the run's own starts "
+              f"({_worse_groups(own, uni, throws)}){other}."]
     return L
 
 

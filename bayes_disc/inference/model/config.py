@@ -37,6 +37,7 @@ imu:                                     # inertial logs (instead of or besides 
     throws: [[1007, 1344]]               # optional: release and first-impact rows per throw (default: found)
     magnetometer: true                   # use the log's magnetometer (default true when the log has one)
     barometer: true                      # use the log's barometer (default false)
+    row_times: magnetometer              # rows placed in time by the magnetometer's phase (default uniform)
 credit: "where the data come from"       # shown in the report wherever the data are shown (licences)
 ```
 """
@@ -47,6 +48,7 @@ from pathlib import Path
 
 from ...observation.config_io import ConfigError, Section, load_yaml
 from ...observation.config_blocks import read_disc_env, read_markers, read_physics
+from ...observation.models.inertial import ROW_TIMES
 from ...observation.models.noise import NOISE_MODELS, PER_POINT
 from ...physics import COEFFICIENT_NAMES, LITERATURE, Disc, Environment, literature_coefficients
 from ...physics.kernel import DEFAULT_METHOD, TABLEAUX
@@ -105,13 +107,15 @@ class FlightOption:
 @dataclass(frozen=True)
 class ImuSource:
     """One inertial log of the run: file, format, optional explicit throws (logger rows, end exclusive) and
-    whether its magnetometer (default) and barometer (on request) are used (when the log has them)."""
+    whether its magnetometer (default) and barometer (on request) are used (when the log has them), and how
+    its rows are placed in time (``row_times``: equally spaced, or by the magnetometer's phase)."""
 
     file: Path
     format: str
     throws: tuple[tuple[int, int], ...] | None = None
     magnetometer: bool = True
     barometer: bool = False
+    row_times: str = "uniform"
 
 
 
@@ -379,7 +383,7 @@ def _read_noise(path: Path, sec: Section, defaults: NoiseSettings | None) -> dic
 
 def _read_imu(path: Path, sec: Section) -> tuple[ImuSource, ...]:
     """The ``imu:`` list: file (relative to the config), format, optional throws [[start, end], ...],
-    ``magnetometer`` (default true) and ``barometer`` (default false)."""
+    ``magnetometer`` (default true), ``barometer`` (default false) and ``row_times`` (default uniform)."""
     raw = sec.raw("imu", None)
     if raw is None:
         return ()
@@ -393,6 +397,7 @@ def _read_imu(path: Path, sec: Section) -> tuple[ImuSource, ...]:
         throws = e.raw("throws", None)
         magnetometer = e.boolean("magnetometer", True)
         barometer = e.boolean("barometer", False)
+        row_times = e.string("row_times", "uniform", choices=ROW_TIMES)
         e.finish()
         if not file.is_file():
             raise ConfigError(path, f"imu[{i}].file", f"file not found: {file}")
@@ -404,5 +409,9 @@ def _read_imu(path: Path, sec: Section) -> tuple[ImuSource, ...]:
                 raise ConfigError(path, f"imu[{i}].throws", "must be a list of [release_row, end_row] integer pairs "
                                   "(end after release, at least 10 rows)")
             throws = tuple((int(a), int(b)) for a, b in throws)
-        out.append(ImuSource(file=file, format=fmt, throws=throws, magnetometer=magnetometer, barometer=barometer))
+        if row_times == "magnetometer" and fmt != "flatball-ins":
+            raise ConfigError(path, f"imu[{i}].row_times", "magnetometer: only for logs without time column "
+                              "(format flatball-ins)")
+        out.append(ImuSource(file=file, format=fmt, throws=throws, magnetometer=magnetometer, barometer=barometer,
+                             row_times=row_times))
     return tuple(out)

@@ -20,7 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...observation.imu import estimate_timebase, find_throws, landing_log, read_imu, throw_logs
+from ...observation.imu import (estimate_timebase, find_throws, landing_log, read_imu, row_offsets_from_magnetometer,
+                                throw_logs)
 from ...observation.imu.formats import ImuFileError, InertialLog
 from ...observation.models.inertial import InertialMeasurements
 from ...observation.models.magnetometer import MAG_OWN_PARAMETERS
@@ -51,6 +52,8 @@ class InertialThrow:
     magnetometer: bool = True        # the source allows its magnetometer to be used (when the log has one)
     barometer: bool = False          # the source asks for its barometer to be used (when the log has one)
     landing: InertialLog | None = None   # rows right after the impact (the barometer's relaxation)
+    row_times: str = "uniform"       # rows equally spaced in time, or placed by the magnetometer's phase
+    row_time_summary: dict | None = None   # with row_times "magnetometer": how far the rows lie from equally spaced
 
     @property
     def name(self) -> str:
@@ -59,7 +62,8 @@ class InertialThrow:
     def to_dict(self) -> dict:
         return {"source": self.source, "status": self.status, "reason": self.reason, "segment": self.segment,
                 "rows": int(len(self.log.rows)), "period_mag_gyro_s": self.period_mag_gyro,
-                "period_mag_gyro_sd_s": self.period_mag_gyro_sd, "repairs": self.repairs}
+                "period_mag_gyro_sd_s": self.period_mag_gyro_sd, "row_times": self.row_times,
+                "row_time_summary": self.row_time_summary, "repairs": self.repairs}
 
 
 def load_run_throws(cfg) -> list[InertialThrow]:
@@ -102,10 +106,17 @@ def load_run_throws(cfg) -> list[InertialThrow]:
                 info = {"start_row": int(seg.start), "end_row": int(seg.end), "orientation": seg.orientation,
                         "reason": seg.reason}
                 period = None if tb is None else float(tb.mag_gyro.period)
+                placed = None
+                if src.row_times == "magnetometer" and status == "ok":
+                    try:
+                        placed = row_offsets_from_magnetometer(sub)[1]
+                    except ValueError as e:
+                        raise ImuFileError(src.file, None, f"row_times: magnetometer: {e}") from e
                 landing = landing_log(rec, seg, int(LANDING_SPAN / (period or NOMINAL_PERIOD)), nxt)
                 out.append(InertialThrow(sub, str(src.file), status, reason, info, period,
                                          None if tb is None else float(tb.mag_gyro.sd), list(rec.repairs),
-                                         magnetometer=src.magnetometer, barometer=src.barometer, landing=landing))
+                                         magnetometer=src.magnetometer, barometer=src.barometer, landing=landing,
+                                         row_times=src.row_times, row_time_summary=placed))
     names = [t.name for t in out]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
@@ -116,7 +127,8 @@ def load_run_throws(cfg) -> list[InertialThrow]:
 def inertial_model(throw: InertialThrow, env) -> InertialMeasurements:
     """The observation model of a throw (nominal period: the magnetometer/gyro estimate, else 10 ms); its
     magnetometer is used when the log carries one and the source does not switch it off, its barometer when
-    the log carries one and the source asks for it (with the rows after the impact when the throw has them).
+    the log carries one and the source asks for it (with the rows after the impact when the throw has them),
+    its rows placed in time as the source says (``row_times``).
 
     Parameters
     ----------
@@ -132,7 +144,7 @@ def inertial_model(throw: InertialThrow, env) -> InertialMeasurements:
     landing = throw.landing if barometer and throw.landing is not None and throw.landing.pressure is not None else None
     return InertialMeasurements(throw.log, env.g, period=throw.period_mag_gyro or NOMINAL_PERIOD,
                                 magnetometer=throw.magnetometer and throw.log.mag is not None,
-                                barometer=barometer, rho=env.rho, landing=landing)
+                                barometer=barometer, rho=env.rho, landing=landing, row_times=throw.row_times)
 
 
 def magnetometer_shared_start(models) -> dict:

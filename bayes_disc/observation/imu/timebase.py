@@ -13,6 +13,17 @@ error of their mean). The magnetometer samples on its own clock (the flatball fi
 continuous mode, two-sample average) so single rows step by whole magnetometer samples; the sums
 are unaffected except at the window edges, which the scatter includes.
 
+**Row times from the magnetometer.** The same phase places every row in time: the flatball logger's
+loop (nominally 10 ms) now and then takes two or three ticks for one row, so the rows are not equally
+spaced, and t_i = (row_i − row_0) P is wrong by up to a few rows over a throw. With the step's phase
+advance Δψ_i taken within ±π of −ω̄_z,i P̄ Δrow_i (P̄ the mean row period),
+
+    Δτ_i = −Δψ_i / ω̄_z,i,    τ_0 = 0,    u_i = (row_n − row_0) τ_i / τ_n                  [rows]
+
+(:func:`row_offsets_from_magnetometer`), and the rows are sampled at t_i = P u_i: the same mean period P,
+each row where the field's phase puts it. The field's own clock (100 Hz, two-sample average) leaves a
+hold of up to one of its samples on each row.
+
 **Barometer cadence.** In the flatball firmware the pressure is read in a separate task that
 sleeps 100 ms (``vTaskDelay``) after each reading, so pressure changes every ``r`` rows with
 ``r · P = T_baro ≥ 0.1 s`` (the task's execution time adds to the sleep). The cadence therefore
@@ -153,6 +164,56 @@ def period_from_mag_gyro(log: InertialLog, start: int, end: int, n_windows: int 
                                   "radius_rel_scatter": float(rad.std() / radius),
                                   "total_phase_rad": float(dphi.sum()),
                                   "max_phase_step_rad": float(np.abs(dphi).max())})
+
+
+def row_offsets_from_magnetometer(log: InertialLog) -> tuple[np.ndarray, dict]:
+    """Every row's time from the magnetometer's phase, in units of the mean row period (module docstring).
+
+    Parameters
+    ----------
+    log : InertialLog
+        One throw's rows (spinning throughout), with ``mag`` [µT] and ``gyro`` [rad/s].
+
+    Returns
+    -------
+    (ndarray, dict)
+        u (n,) [rows]: u_0 = 0, u_{n−1} = row_{n−1} − row_0, increasing; and a summary: ``mean_period_s``
+        τ_n / (row_n − row_0), ``shortest_step_s`` and ``longest_step_s`` per logger row, and
+        ``deviation_rms_rows`` and ``deviation_max_rows``, u against the equally spaced rows.
+
+    Raises
+    ------
+    ValueError
+        No magnetometer; fewer than 8 rows; the sensor turns less than one revolution; the field turns
+        with the spin instead of against it; or a row whose phase does not advance (the line is named).
+    """
+    if log.mag is None:
+        raise ValueError(f"{log.name}: row times from the magnetometer need a magnetometer")
+    n = len(log.rows)
+    if n < 8:
+        raise ValueError(f"{log.name}: {n} rows are too few for row times from the magnetometer")
+    dphi, turn, _, _, _ = _phase_and_turn(log, 0, n)
+    drow = np.diff(log.rows).astype(float)
+    if abs(turn.sum()) < 2 * math.pi:
+        raise ValueError(f"{log.name}: the sensor turns less than one revolution about z")
+    # turn is ∫ω_z dt / P̄ per step at P̄ = 1; the mean period follows from the wrapped phases first
+    mean_period = abs(dphi.sum() / turn.sum())
+    expected = -turn * mean_period
+    dphi = dphi + 2 * math.pi * np.round((expected - dphi) / (2 * math.pi))
+    if np.sum(dphi) * np.sum(turn) >= 0:
+        raise ValueError(f"{log.name}: the field's phase turns with the spin, not against it (magnetometer axes?)")
+    step = -dphi / (turn / drow)                                    # Δτ_i [s]
+    bad = np.flatnonzero(step <= 0)
+    if bad.size:
+        raise ValueError(f"{log.name}: the magnetometer's phase does not advance from line {log.lines[bad[0]]} "
+                         f"to line {log.lines[bad[0] + 1]} ({bad.size} such step(s)); use row_times: uniform")
+    tau = np.r_[0.0, np.cumsum(step)]
+    rows = (log.rows - log.rows[0]).astype(float)
+    u = rows[-1] * tau / tau[-1]
+    per_row = step / drow
+    return u, {"mean_period_s": float(tau[-1] / rows[-1]), "shortest_step_s": float(per_row.min()),
+               "longest_step_s": float(per_row.max()), "deviation_rms_rows": float(np.sqrt(np.mean((u - rows) ** 2))),
+               "deviation_max_rows": float(np.abs(u - rows).max())}
 
 
 def baro_cadence(log: InertialLog, start: int | None = None, end: int | None = None) -> BaroCadence:

@@ -16,7 +16,10 @@ aerodynamic (and any extra-term) force does per unit mass plus the rotational te
 centripetal term dominates (≈ 6 g at r = 55 rad/s, |r_s| = 2 cm).
 
 A log without time column (``flatball-ins``) is sampled at t_i = (row_i − row_0) P with the row period P
-[s] unknown (``imu_period_<flight>``); an ``imu-csv`` log gives t_i. The simulation runs on a fixed fine
+[s] unknown (``imu_period_<flight>``), or, with ``row_times="magnetometer"``, at t_i = P u_i with u_i
+[rows] the row's place in time from the magnetometer's phase (the logger's loop now and then takes two or
+three ticks for one row; :func:`..imu.timebase.row_offsets_from_magnetometer`); an ``imu-csv`` log gives
+t_i. The simulation runs on a fixed fine
 grid (four points per nominal row); dv/dt and dω_B/dt come from fourth-order finite differences of the
 simulated states (exact for any extra physics term), the filter is integrated exactly for inputs linear
 between grid points, and the outputs are interpolated (cubic Lagrange) at each parameter vector's own
@@ -65,12 +68,15 @@ import numpy as np
 from ...physics import TermParameter
 from ...physics.frames import quat_from_rotvec, quat_to_matrix
 from ..imu.formats import InertialLog
+from ..imu.timebase import row_offsets_from_magnetometer
 from .base import ObservationModel, ResidualSeries
 from .barometer import (BARO_GROUPS, BARO_NOMINAL_NOISE, BARO_SERIES, BARO_SHARED_PARAMETERS, outside_pressure,
                         own_parameters, reading_rows, relax)
 from .magnetometer import (MAG_GROUPS, MAG_NOMINAL_NOISE, MAG_OWN_PARAMETERS, MAG_SERIES, MAG_SHARED_PARAMETERS,
                            MAG_WINDOW, body_field, field_world, window_mean)
 
+#: how the rows of a log without time column are placed in time: equally spaced, or by the magnetometer's phase
+ROW_TIMES = ("uniform", "magnetometer")
 #: fine simulation points per nominal row period
 OVERSAMPLE = 4
 #: longest row period [s] a parameter vector may take, as a multiple of the nominal one (grid length)
@@ -262,13 +268,18 @@ class InertialMeasurements(ObservationModel):
     landing : InertialLog, optional
         The recording's rows right after the flight (the disc on the ground), for the barometer only: their
         readings follow the sensor's relaxation to the landing height's pressure (:mod:`.barometer`).
+    row_times : str
+        One of :data:`ROW_TIMES`: rows equally spaced in time (``uniform``), or placed by the magnetometer's
+        phase (``magnetometer``, logs without time column that carry a magnetometer; the magnetometer need
+        not be predicted). The landing rows follow the flight's last row equally spaced.
     """
 
     id = "imu"
     title = "Inertial logger: gyroscope, low-pass-filtered accelerometer, magnetometer and barometer"
     equations = ("ω_s = C ω_B + b_g;  τ dy/dt = C[Rᵀ(dv/dt + g ẑ) + ω̇_B × r_s + ω_B × (ω_B × r_s)] − y, "
                  "a_s = y + b_a;  m_s = C ⟨Rᵀ⟩ B_w + h (window 2 T_m);  "
-                 "τ_b dp_s/dt = p_0 − ρ g (z − z_0) + c_q ½ρ|v|² − p_s;  t_i = (row_i − row_0) P")
+                 "τ_b dp_s/dt = p_0 − ρ g (z − z_0) + c_q ½ρ|v|² − p_s;  t_i = (row_i − row_0) P "
+                 "or P u_i (u_i from the magnetometer's phase)")
 
     log: InertialLog
     g: float
@@ -277,6 +288,7 @@ class InertialMeasurements(ObservationModel):
     barometer: bool = False
     rho: float | None = None
     landing: InertialLog | None = None
+    row_times: str = "uniform"
     _obs: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -291,22 +303,32 @@ class InertialMeasurements(ObservationModel):
         if self.landing is not None and (self.timed or not self.barometer):
             raise ValueError(f"{self.log.name}: landing rows are used by the barometer of a log without time column "
                              "only")
+        if self.row_times not in ROW_TIMES:
+            raise ValueError(f"{self.log.name}: row_times must be one of {ROW_TIMES}, got {self.row_times!r}")
+        if self.row_times == "magnetometer" and self.log.times is not None:
+            raise ValueError(f"{self.log.name}: the log has a time column; row times from the magnetometer are for "
+                             "logs without one")
         rows = np.asarray(self.log.rows, float)
         self.n_flight = rows.size
         after = [] if self.landing is None else np.asarray(self.landing.rows, float)
         self.row_offsets = np.r_[rows, after] - rows[0]           # (n,) rows since release, landing rows last
+        self.time_offsets = self.row_offsets.copy()               # (n,) t_i / P [rows]
+        self.row_time_summary = None
+        if self.row_times == "magnetometer":
+            u, self.row_time_summary = row_offsets_from_magnetometer(self.log)
+            self.time_offsets[: self.n_flight] = u
         self.h = self.period / OVERSAMPLE
         if self.timed:
             self.sample_times = np.asarray(self.log.times, float) - float(self.log.times[0])
             span = self.sample_times[-1]
         else:
-            span = self.row_offsets[self.n_flight - 1] * self.period * PERIOD_SPAN
+            span = self.time_offsets[self.n_flight - 1] * self.period * PERIOD_SPAN
         n_grid = max(int(np.ceil(span / self.h)) + 3, 6)
         self.times = np.arange(n_grid) * self.h                   # simulation grid [s] from release
         data = self.measured
         self._seen = np.isfinite(data)
         if self.magnetometer:     # rows whose nominal window reaches before release: the hand's spin-up
-            nominal = self.sample_times if self.timed else self.row_offsets * self.period
+            nominal = self.sample_times if self.timed else self.time_offsets * self.period
             self._seen[nominal < MAG_WINDOW, 6:9] = False
         self._obs = data[self._seen]
         channel = np.broadcast_to(np.arange(data.shape[1]), data.shape)[self._seen]
@@ -389,7 +411,7 @@ class InertialMeasurements(ObservationModel):
         last."""
         if self.timed:
             return np.broadcast_to(self.sample_times, (period.shape[0], self.sample_times.size))
-        return period[:, None] * self.row_offsets[None, :]
+        return period[:, None] * self.time_offsets[None, :]
 
     def split(self, extra: np.ndarray) -> dict:
         """Named parameter arrays (B, …) from the model's extra values (shared, then own); with the
