@@ -70,6 +70,9 @@ def test_irregular_rows_are_placed_where_they_were_logged(sign):
     assert summary["deviation_max_rows"] > 2.0
     assert summary["longest_step_s"] == pytest.approx(3 * TICK, abs=1e-3)
     assert summary["shortest_step_s"] == pytest.approx(TICK, abs=1e-3)
+    assert summary["sample_period_s"] == pytest.approx(TICK, abs=2e-4)
+    ticks = np.round(np.diff(t) / TICK).astype(int)
+    assert summary["rows_by_samples"] == {str(k): int(np.sum(ticks == k)) for k in (1, 2, 3)}
 
 
 def test_a_missing_row_whose_phase_wraps_is_unwrapped_by_the_mean_period():

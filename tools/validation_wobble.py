@@ -145,7 +145,8 @@ def row_times_block(throws: list[str]) -> list[str]:
     ends with the magnetometer's rows."""
     rt = load(ROW_TIMES)
     uni, mag, own = rt["refit"]["uniform"], rt["refit"]["magnetometer"], rt["run_starts"]
-    prow = [[t, f"{r['mean_period_s'] * 1e3:.2f}",
+    prow = [[t, f"{r['mean_period_s'] * 1e3:.2f}", f"{r['sample_period_s'] * 1e3:.2f}",
+             " / ".join(f"{n}" for _, n in sorted(r["rows_by_samples"].items(), key=lambda kv: int(kv[0]))),
              f"{r['shortest_step_s'] * 1e3:.1f}–{r['longest_step_s'] * 1e3:.1f}",
              f"{r['deviation_max_rows'] * r['mean_period_s'] * 1e3:.0f}"] for t, r in rt["rows"].items()]
     rows = []
@@ -158,9 +159,11 @@ def row_times_block(throws: list[str]) -> list[str]:
     gain_own = uni["sum_n_ln_sigma_without_mag"] - own["sum_n_ln_sigma_without_mag"]
     L = ["", "Rows placed in time by the magnetometer (`row_times: magnetometer`, "
              "`runs/flatball/wobble/row_times.json`, made by `python tools/row_times_refit.py`): each row where the "
-             "field's phase puts it. Per throw, the mean row period, the shortest and longest time between two rows "
-             "and the largest distance of a row from equally spaced rows [ms]:", ""]
-    L += table(["throw", "mean row period [ms]", "time between rows [ms]", "largest shift [ms]"], prow)
+             "field's phase puts it. Per throw, the mean row period, one magnetometer sample, the rows that took "
+             "1 / 2 / 3 … samples (equally spaced rows of the mean period could take at most two), the shortest and "
+             "longest time between two rows and the largest distance of a row from equally spaced rows:", ""]
+    L += table(["throw", "mean row period [ms]", "magnetometer sample [ms]", "rows of 1 / 2 / 3 … samples",
+                "time between rows [ms]", "largest shift [ms]"], prow)
     L += ["", "The same throws, model and terms, the rows equally spaced → placed by the magnetometer, both "
               "refitted alike from this run's optimum (initial conditions, then everything); after the semicolon, "
               "the run's own least squares from its starts with the placed rows. RMS per group:", ""]

@@ -13,9 +13,9 @@ error of their mean). The magnetometer samples on its own clock (the flatball fi
 continuous mode, two-sample average) so single rows step by whole magnetometer samples; the sums
 are unaffected except at the window edges, which the scatter includes.
 
-**Row times from the magnetometer.** The same phase places every row in time: the flatball logger's
-loop (nominally 10 ms) now and then takes two or three ticks for one row, so the rows are not equally
-spaced, and t_i = (row_i − row_0) P is wrong by up to a few rows over a throw. With the step's phase
+**Row times from the magnetometer.** The same phase places every row in time: the flatball logger now
+and then takes two or three magnetometer samples' time for one row, so the rows are not equally spaced,
+and t_i = (row_i − row_0) P is wrong by up to a few rows over a throw. With the step's phase
 advance Δψ_i taken within ±π of −ω̄_z,i P̄ Δrow_i (P̄ the mean row period),
 
     Δτ_i = −Δψ_i / ω̄_z,i,    τ_0 = 0,    u_i = (row_n − row_0) τ_i / τ_n                  [rows]
@@ -39,6 +39,8 @@ import numpy as np
 
 from .formats import InertialLog
 
+#: steps below this multiple of the shortest tenth count as one magnetometer sample (row_offsets_from_magnetometer)
+SINGLE_STEP_FACTOR = 1.5
 #: sleep of the flatball firmware's barometer task between readings (s): a lower bound of its period
 FLATBALL_BARO_SLEEP = 0.100
 
@@ -178,8 +180,10 @@ def row_offsets_from_magnetometer(log: InertialLog) -> tuple[np.ndarray, dict]:
     -------
     (ndarray, dict)
         u (n,) [rows]: u_0 = 0, u_{n−1} = row_{n−1} − row_0, increasing; and a summary: ``mean_period_s``
-        τ_n / (row_n − row_0), ``shortest_step_s`` and ``longest_step_s`` per logger row, and
-        ``deviation_rms_rows`` and ``deviation_max_rows``, u against the equally spaced rows.
+        τ_n / (row_n − row_0), ``shortest_step_s`` and ``longest_step_s`` per logger row,
+        ``sample_period_s`` (the median step among those below :data:`SINGLE_STEP_FACTOR` times the shortest
+        tenth: one magnetometer sample), ``rows_by_samples`` ({"1": rows, "2": …}: the steps in whole
+        samples), and ``deviation_rms_rows`` and ``deviation_max_rows``, u against the equally spaced rows.
 
     Raises
     ------
@@ -192,13 +196,12 @@ def row_offsets_from_magnetometer(log: InertialLog) -> tuple[np.ndarray, dict]:
     n = len(log.rows)
     if n < 8:
         raise ValueError(f"{log.name}: {n} rows are too few for row times from the magnetometer")
-    dphi, turn, _, _, _ = _phase_and_turn(log, 0, n)
+    dphi, turn, _, _, _ = _phase_and_turn(log, 0, n)          # turn: ω̄_z Δrow per step [rad/s × rows]
     drow = np.diff(log.rows).astype(float)
-    if abs(turn.sum()) < 2 * math.pi:
+    mean_period = abs(dphi.sum() / turn.sum()) if turn.sum() != 0 else 0.0
+    if mean_period * abs(turn.sum()) < 2 * math.pi:
         raise ValueError(f"{log.name}: the sensor turns less than one revolution about z")
-    # turn is ∫ω_z dt / P̄ per step at P̄ = 1; the mean period follows from the wrapped phases first
-    mean_period = abs(dphi.sum() / turn.sum())
-    expected = -turn * mean_period
+    expected = -turn * mean_period                                # each step unwrapped around the mean period
     dphi = dphi + 2 * math.pi * np.round((expected - dphi) / (2 * math.pi))
     if np.sum(dphi) * np.sum(turn) >= 0:
         raise ValueError(f"{log.name}: the field's phase turns with the spin, not against it (magnetometer axes?)")
@@ -211,8 +214,13 @@ def row_offsets_from_magnetometer(log: InertialLog) -> tuple[np.ndarray, dict]:
     rows = (log.rows - log.rows[0]).astype(float)
     u = rows[-1] * tau / tau[-1]
     per_row = step / drow
+    single = per_row[per_row < SINGLE_STEP_FACTOR * np.percentile(per_row, 10)]
+    sample = float(np.median(single))
+    counts = np.round(per_row / sample).astype(int)
     return u, {"mean_period_s": float(tau[-1] / rows[-1]), "shortest_step_s": float(per_row.min()),
-               "longest_step_s": float(per_row.max()), "deviation_rms_rows": float(np.sqrt(np.mean((u - rows) ** 2))),
+               "longest_step_s": float(per_row.max()), "sample_period_s": sample,
+               "rows_by_samples": {str(c): int(np.sum(counts == c)) for c in np.unique(counts)},
+               "deviation_rms_rows": float(np.sqrt(np.mean((u - rows) ** 2))),
                "deviation_max_rows": float(np.abs(u - rows).max())}
 
 
