@@ -9,6 +9,7 @@ from bayes_disc.observation.config_io import ConfigError
 from bayes_disc.observation.imu import InertialLog, row_offsets_from_magnetometer
 from bayes_disc.observation.models.inertial import InertialMeasurements
 from bayes_disc.physics import Environment
+from bayes_disc.report.inertial import period_label
 
 from conftest import SHARED
 
@@ -151,3 +152,15 @@ def test_the_shipped_throws_have_rows_that_took_three_magnetometer_samples(tmp_p
         assert summary["mean_period_s"] == pytest.approx(rec["period_mag_gyro_s"], rel=0.01)
         assert summary["longest_step_s"] > 2.5 * summary["shortest_step_s"]     # a row longer than two samples
         assert summary["deviation_max_rows"] > 1.0
+
+
+def test_the_report_says_where_the_rows_were_placed():
+    log, t = _irregular_log()
+    summary = row_offsets_from_magnetometer(log)[1]
+    rec = {"period_mag_gyro_s": 0.01224, "period_mag_gyro_sd_s": 0.00009}
+    assert period_label("001-rb", rec) == "row period 001-rb (magnetometer vs gyro: 12.240 ± 0.090 ms)"
+    label = period_label("001-rb", {**rec, "row_times": "magnetometer", "row_time_summary": summary})
+    largest = summary["deviation_max_rows"] * summary["mean_period_s"] * 1e3
+    assert label.endswith(f"; rows placed by the magnetometer, {summary['shortest_step_s'] * 1e3:.1f}–"
+                          f"{summary['longest_step_s'] * 1e3:.1f} ms apart, up to {largest:.0f} ms from equally spaced")
+    assert period_label("x", {}) == "row period x"

@@ -72,6 +72,29 @@ def _param_row(p: dict, name: str, label: str, scale: float = 1.0, unit: str = "
             fmt(q["r_hat"], 4), f"{q['ess_bulk']:.0f}"]
 
 
+def period_label(name: str, throw: dict) -> str:
+    """The row period's label in the logger table: the magnetometer's own estimate beside it and, when the
+    rows were placed by the magnetometer, how far apart they came and how far from equally spaced.
+
+    Parameters
+    ----------
+    name : str
+        The throw.
+    throw : dict
+        Its ``summary.json`` → ``inertial_throws`` record (may be empty).
+    """
+    label = f"row period {name}"
+    if throw.get("period_mag_gyro_s"):
+        label += (f" (magnetometer vs gyro: {throw['period_mag_gyro_s'] * 1e3:.3f} ± "
+                  f"{throw['period_mag_gyro_sd_s'] * 1e3:.3f} ms)")
+    placed = throw.get("row_time_summary")
+    if placed:
+        label += (f"; rows placed by the magnetometer, {placed['shortest_step_s'] * 1e3:.1f}–"
+                  f"{placed['longest_step_s'] * 1e3:.1f} ms apart, up to "
+                  f"{placed['deviation_max_rows'] * placed['mean_period_s'] * 1e3:.0f} ms from equally spaced")
+    return label
+
+
 def inertial_section(ctx) -> Section | None:
     """Logger parameters, throws measured vs predicted, residuals, segmentation; None without inertial data."""
     from .content import _figure, flights_table
@@ -113,12 +136,7 @@ def inertial_section(ctx) -> Section | None:
         name = ctx.problem.flights[k].name
         key = f"imu_period_{name}"
         if key in p:
-            label = f"row period {name}"
-            ind = throws.get(name, {})
-            if ind.get("period_mag_gyro_s"):
-                label += (f" (magnetometer vs gyro: {ind['period_mag_gyro_s'] * 1e3:.3f} ± "
-                          f"{ind['period_mag_gyro_sd_s'] * 1e3:.3f} ms)")
-            rows.append(_param_row(p, key, label, 1e3, "ms"))
+            rows.append(_param_row(p, key, period_label(name, throws.get(name, {})), 1e3, "ms"))
     html = ("<p>The logger's parameters, shared by the run's throws (its position and filter) or per throw "
             "(the row period). The row period is estimated by the flight model; the magnetometer against the gyro "
             "gives an independent estimate (in brackets).</p>"
