@@ -13,9 +13,10 @@ error of their mean). The magnetometer samples on its own clock (the flatball fi
 continuous mode, two-sample average) so single rows step by whole magnetometer samples; the sums
 are unaffected except at the window edges, which the scatter includes.
 
-**Row times from the magnetometer.** The same phase places every row in time: the flatball logger now
-and then takes two or three magnetometer samples' time for one row, so the rows are not equally spaced,
-and t_i = (row_i − row_0) P is wrong by up to a few rows over a throw. With the step's phase
+**Row times from the magnetometer.** The same phase places every row in time: between two rows of the
+flatball logger the field advances by one, two or three of the magnetometer's samples, which rows equally
+spaced at the mean period could not hold (at most two), so t_i = (row_i − row_0) P is wrong by up to a few
+rows over a throw (unless the magnetometer's readings, not the rows, are uneven). With the step's phase
 advance Δψ_i taken within ±π of −ω̄_z,i P̄ Δrow_i (P̄ the mean row period),
 
     Δτ_i = −Δψ_i / ω̄_z,i,    τ_0 = 0,    u_i = (row_n − row_0) τ_i / τ_n                  [rows]

@@ -17,8 +17,8 @@ centripetal term dominates (≈ 6 g at r = 55 rad/s, |r_s| = 2 cm).
 
 A log without time column (``flatball-ins``) is sampled at t_i = (row_i − row_0) P with the row period P
 [s] unknown (``imu_period_<flight>``), or, with ``row_times="magnetometer"``, at t_i = P u_i with u_i
-[rows] the row's place in time from the magnetometer's phase (the logger now and then takes two or three
-magnetometer samples' time for one row; :func:`..imu.timebase.row_offsets_from_magnetometer`); an
+[rows] the row's place in time from the magnetometer's phase (between two rows the field advances by one,
+two or three magnetometer samples; :func:`..imu.timebase.row_offsets_from_magnetometer`); an
 ``imu-csv`` log gives t_i. The simulation runs on a fixed fine grid (four points per nominal row); dv/dt
 and dω_B/dt come from fourth-order finite differences of the simulated states (exact for any extra physics
 term), the filter is integrated exactly for inputs linear between grid points, and the outputs are
