@@ -9,8 +9,8 @@ Writes ``runs/flatball/wobble/row_times.json`` (``--output``), which docs/valida
   other than the magnetometer's (which places the rows, so its own misfit is no independent check).
 - ``run_starts``: the run's own least squares (its starts, ``least_squares`` settings of the config) with
   the rows placed by the magnetometer: where the start search ends.
-- ``rows``: per throw, how far the magnetometer puts the rows from equally spaced ones
-  (``row_offsets_from_magnetometer``).
+- ``rows``: per throw, how far the magnetometer puts the rows from equally spaced ones (the observation
+  model's ``row_time_summary``, from ``row_offsets_from_magnetometer``).
 
 Usage (from the repository root; about 5 min on two cores)::
 
@@ -31,7 +31,7 @@ import numpy as np
 from bayes_disc.inference.fitting.leastsq import fit_least_squares, refine_least_squares
 from bayes_disc.inference.model.config import load_config
 from bayes_disc.inference.model.data import build_problem
-from bayes_disc.inference.model.inertial import load_run_throws
+from bayes_disc.observation.models.inertial import InertialMeasurements
 
 ROOT = Path(__file__).resolve().parents[1]
 #: evaluations of the initial-conditions-only fit that adapts the run's optimum to a row placement
@@ -83,7 +83,8 @@ def main(argv=None) -> int:
         rec["refit"][placement] = refit(problem, x0, a.max_nfev)
         print(placement, round(rec["refit"][placement]["sum_n_ln_sigma_without_mag"], 1), flush=True)
         if placement == "magnetometer":
-            rec["rows"] = {t.name: t.row_time_summary for t in load_run_throws(c) if t.status == "ok"}
+            rec["rows"] = {f.name: m.row_time_summary for f, ms in zip(problem.flights, problem.observations)
+                           for m in ms if isinstance(m, InertialMeasurements)}
             t0 = time.perf_counter()
             ls = fit_least_squares(problem, starts=c.least_squares.starts, max_nfev=c.least_squares.max_nfev,
                                    seed=c.sampler.seed)

@@ -136,7 +136,7 @@ def _worse_groups(fit: dict, ref: dict, throws: list[str]) -> str:
     if not keys:
         return f"no group other than the magnetometer's transverse one more than {100 * ACC_TOLERANCE:.0f} % worse"
     return (f"{len(keys)} group(s) more than {100 * ACC_TOLERANCE:.0f} % worse: "
-            + ", ".join("{} of {}".format(*split_group(k, throws)).replace("2025-08-31-", "") for k in keys))
+            + ", ".join(f"{g} of {t[-6:]}" for g, t in (split_group(k, throws) for k in keys)))
 
 
 def row_times_block(throws: list[str]) -> list[str]:
