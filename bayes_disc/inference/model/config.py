@@ -38,6 +38,8 @@ imu:                                     # inertial logs (instead of or besides 
     magnetometer: true                   # use the log's magnetometer (default true when the log has one)
     barometer: true                      # use the log's barometer (default false)
     row_times: magnetometer              # rows placed in time by the magnetometer's phase (default uniform)
+    gyro_noise: nutation                 # transverse gyro noise: white (default), or white plus a randomly
+                                         # forced nutation (Kalman filter)
 credit: "where the data come from"       # shown in the report wherever the data are shown (licences)
 ```
 """
@@ -49,6 +51,7 @@ from pathlib import Path
 from ...observation.config_io import ConfigError, Section, load_yaml
 from ...observation.config_blocks import read_disc_env, read_markers, read_physics
 from ...observation.models.inertial import ROW_TIMES
+from ...observation.models.nutation import GYRO_NOISE
 from ...observation.models.noise import NOISE_MODELS, PER_POINT
 from ...physics import COEFFICIENT_NAMES, LITERATURE, Disc, Environment, literature_coefficients
 from ...physics.kernel import DEFAULT_METHOD, TABLEAUX
@@ -108,7 +111,8 @@ class FlightOption:
 class ImuSource:
     """One inertial log of the run: file, format, optional explicit throws (logger rows, end exclusive) and
     whether its magnetometer (default) and barometer (on request) are used (when the log has them), and how
-    its rows are placed in time (``row_times``: equally spaced, or by the magnetometer's phase)."""
+    its rows are placed in time (``row_times``: equally spaced, or by the magnetometer's phase) and what noise its
+    transverse gyro has (``gyro_noise``: white, or white plus a randomly forced nutation)."""
 
     file: Path
     format: str
@@ -116,6 +120,7 @@ class ImuSource:
     magnetometer: bool = True
     barometer: bool = False
     row_times: str = "uniform"
+    gyro_noise: str = "white"
 
 
 
@@ -383,7 +388,8 @@ def _read_noise(path: Path, sec: Section, defaults: NoiseSettings | None) -> dic
 
 def _read_imu(path: Path, sec: Section) -> tuple[ImuSource, ...]:
     """The ``imu:`` list: file (relative to the config), format, optional throws [[start, end], ...],
-    ``magnetometer`` (default true), ``barometer`` (default false) and ``row_times`` (default uniform)."""
+    ``magnetometer`` (default true), ``barometer`` (default false), ``row_times`` (default uniform) and
+    ``gyro_noise`` (default white)."""
     raw = sec.raw("imu", None)
     if raw is None:
         return ()
@@ -398,6 +404,7 @@ def _read_imu(path: Path, sec: Section) -> tuple[ImuSource, ...]:
         magnetometer = e.boolean("magnetometer", True)
         barometer = e.boolean("barometer", False)
         row_times = e.string("row_times", "uniform", choices=ROW_TIMES)
+        gyro_noise = e.string("gyro_noise", "white", choices=GYRO_NOISE)
         e.finish()
         if not file.is_file():
             raise ConfigError(path, f"imu[{i}].file", f"file not found: {file}")
@@ -413,5 +420,5 @@ def _read_imu(path: Path, sec: Section) -> tuple[ImuSource, ...]:
             raise ConfigError(path, f"imu[{i}].row_times", "magnetometer: only for logs without time column "
                               "(format flatball-ins)")
         out.append(ImuSource(file=file, format=fmt, throws=throws, magnetometer=magnetometer, barometer=barometer,
-                             row_times=row_times))
+                             row_times=row_times, gyro_noise=gyro_noise))
     return tuple(out)

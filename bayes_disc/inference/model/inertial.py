@@ -54,6 +54,7 @@ class InertialThrow:
     landing: InertialLog | None = None   # rows right after the impact (the barometer's relaxation)
     row_times: str = "uniform"       # rows equally spaced in time, or placed by the magnetometer's phase
     row_time_summary: dict | None = None   # with row_times "magnetometer": how far the rows lie from equally spaced
+    gyro_noise: str = "white"        # transverse gyro noise: white, or with a randomly forced nutation
 
     @property
     def name(self) -> str:
@@ -63,7 +64,7 @@ class InertialThrow:
         return {"source": self.source, "status": self.status, "reason": self.reason, "segment": self.segment,
                 "rows": int(len(self.log.rows)), "period_mag_gyro_s": self.period_mag_gyro,
                 "period_mag_gyro_sd_s": self.period_mag_gyro_sd, "row_times": self.row_times,
-                "row_time_summary": self.row_time_summary, "repairs": self.repairs}
+                "row_time_summary": self.row_time_summary, "gyro_noise": self.gyro_noise, "repairs": self.repairs}
 
 
 def load_run_throws(cfg) -> list[InertialThrow]:
@@ -84,7 +85,8 @@ def load_run_throws(cfg) -> list[InertialThrow]:
                 log.info("%s: repaired: %s", src.file.name, r)
             if rec.times is not None:          # imu-csv: each flight is a free flight from its first row
                 out.append(InertialThrow(rec, str(src.file), "ok", "timed log: whole flight", repairs=rec.repairs,
-                                         magnetometer=src.magnetometer, barometer=src.barometer))
+                                         magnetometer=src.magnetometer, barometer=src.barometer,
+                                         gyro_noise=src.gyro_noise))
                 continue
             segments = find_throws(rec, override=list(src.throws) if src.throws else None)
             if not segments:
@@ -116,7 +118,8 @@ def load_run_throws(cfg) -> list[InertialThrow]:
                 out.append(InertialThrow(sub, str(src.file), status, reason, info, period,
                                          None if tb is None else float(tb.mag_gyro.sd), list(rec.repairs),
                                          magnetometer=src.magnetometer, barometer=src.barometer, landing=landing,
-                                         row_times=src.row_times, row_time_summary=placed))
+                                         row_times=src.row_times, row_time_summary=placed,
+                                         gyro_noise=src.gyro_noise))
     names = [t.name for t in out]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
@@ -128,7 +131,8 @@ def inertial_model(throw: InertialThrow, env) -> InertialMeasurements:
     """The observation model of a throw (nominal period: the magnetometer/gyro estimate, else 10 ms); its
     magnetometer is used when the log carries one and the source does not switch it off, its barometer when
     the log carries one and the source asks for it (with the rows after the impact when the throw has them),
-    its rows placed in time as the source says (``row_times``).
+    its rows placed in time as the source says (``row_times``), its transverse gyro noise as the source says
+    (``gyro_noise``).
 
     Parameters
     ----------
@@ -144,7 +148,8 @@ def inertial_model(throw: InertialThrow, env) -> InertialMeasurements:
     landing = throw.landing if barometer and throw.landing is not None and throw.landing.pressure is not None else None
     return InertialMeasurements(throw.log, env.g, period=throw.period_mag_gyro or NOMINAL_PERIOD,
                                 magnetometer=throw.magnetometer and throw.log.mag is not None,
-                                barometer=barometer, rho=env.rho, landing=landing, row_times=throw.row_times)
+                                barometer=barometer, rho=env.rho, landing=landing, row_times=throw.row_times,
+                                gyro_noise=throw.gyro_noise)
 
 
 def magnetometer_shared_start(models) -> dict:

@@ -73,6 +73,7 @@ from .barometer import (BARO_GROUPS, BARO_NOMINAL_NOISE, BARO_SERIES, BARO_SHARE
                         own_parameters, reading_rows, relax)
 from .magnetometer import (MAG_GROUPS, MAG_NOMINAL_NOISE, MAG_OWN_PARAMETERS, MAG_SERIES, MAG_SHARED_PARAMETERS,
                            MAG_WINDOW, body_field, field_world, window_mean)
+from .nutation import GYRO_NOISE, NUTATION_SHARED_PARAMETERS, nutation_filter
 
 #: how the rows of a log without time column are placed in time: equally spaced, or by the magnetometer's phase
 ROW_TIMES = ("uniform", "magnetometer")
@@ -271,6 +272,10 @@ class InertialMeasurements(ObservationModel):
         One of :data:`ROW_TIMES`: rows equally spaced in time (``uniform``), or placed by the magnetometer's
         phase (``magnetometer``, logs without time column that carry a magnetometer; the magnetometer need
         not be predicted). The landing rows follow the flight's last row equally spaced.
+    gyro_noise : str
+        One of :data:`.nutation.GYRO_NOISE`: the transverse gyro's noise white (``white``), or white plus a
+        randomly forced nutation (``nutation``, :mod:`.nutation`: its three parameters are shared by the
+        logger's throws and the residuals are whitened by its Kalman filter).
     """
 
     id = "imu"
@@ -288,6 +293,7 @@ class InertialMeasurements(ObservationModel):
     rho: float | None = None
     landing: InertialLog | None = None
     row_times: str = "uniform"
+    gyro_noise: str = "white"
     _obs: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
@@ -307,6 +313,8 @@ class InertialMeasurements(ObservationModel):
         if self.row_times == "magnetometer" and self.log.times is not None:
             raise ValueError(f"{self.log.name}: the log has a time column; row times from the magnetometer are for "
                              "logs without one")
+        if self.gyro_noise not in GYRO_NOISE:
+            raise ValueError(f"{self.log.name}: gyro_noise must be one of {GYRO_NOISE}, got {self.gyro_noise!r}")
         rows = np.asarray(self.log.rows, float)
         self.n_flight = rows.size
         after = [] if self.landing is None else np.asarray(self.landing.rows, float)
@@ -332,6 +340,11 @@ class InertialMeasurements(ObservationModel):
         self._obs = data[self._seen]
         channel = np.broadcast_to(np.arange(data.shape[1]), data.shape)[self._seen]
         self._groups = np.array(self.series_groups)[channel].astype(np.intp)
+        # positions of the flight rows' gyro x and y in the residual vector, for the nutation's filter
+        position = (np.cumsum(self._seen.ravel()) - 1).reshape(self._seen.shape)
+        if not self._seen[: self.n_flight, :2].all():
+            raise ValueError(f"{self.log.name}: a flight row has no gyro x or y reading")
+        self._gyro_xy = position[: self.n_flight, :2]
 
     # -- channels ------------------------------------------------------------------------------------
     @property
@@ -370,6 +383,7 @@ class InertialMeasurements(ObservationModel):
     @property
     def shared_parameters(self) -> tuple[TermParameter, ...]:
         return (SHARED_PARAMETERS + (MAG_SHARED_PARAMETERS if self.magnetometer else ())
+                + (NUTATION_SHARED_PARAMETERS if self.gyro_noise == "nutation" else ())
                 + (BARO_SHARED_PARAMETERS if self.barometer else ()))
 
     @property
@@ -416,7 +430,7 @@ class InertialMeasurements(ObservationModel):
         """Named parameter arrays (B, …) from the model's extra values (shared, then own); with the
         magnetometer also ``field`` (B, 3) [µT] in world axes and ``hard_iron`` (B, 3) [µT]; with the
         barometer ``baro_dynamic`` (B,) [–], ``baro_lag`` (B,) [s], ``baro_reference`` and ``baro_state``
-        (B,) [Pa]."""
+        (B,) [Pa]; with the randomly forced nutation ``nutation`` (B, 3): λ [1/s], κ_N [–], a [–]."""
         ns = len(self.shared_parameters)
         s = extra[:, :ns]
         own = extra[:, ns:]
@@ -427,6 +441,9 @@ class InertialMeasurements(ObservationModel):
         if self.magnetometer:
             out["field"] = field_world(s[:, 6], s[:, 7], own[:, j + 9])
             out["hard_iron"] = s[:, 8:11]
+        if self.gyro_noise == "nutation":
+            at = len(SHARED_PARAMETERS) + (len(MAG_SHARED_PARAMETERS) if self.magnetometer else 0)
+            out["nutation"] = s[:, at: at + len(NUTATION_SHARED_PARAMETERS)]
         if self.barometer:
             out["baro_dynamic"], out["baro_lag"] = s[:, ns - 2], s[:, ns - 1]
             out["baro_reference"], out["baro_state"] = own[:, -2], own[:, -1]
@@ -504,6 +521,49 @@ class InertialMeasurements(ObservationModel):
 
     def residuals(self, prediction: np.ndarray) -> np.ndarray:
         return prediction[:, self._seen] - self._obs[None]
+
+    # -- noise: white, or with the randomly forced nutation in the transverse gyro (:mod:`.nutation`) ------
+    def _nutation(self, residuals: np.ndarray, extra: np.ndarray):
+        """The nutation filter's whitened gyro x, y (B, n_flight) each and its log-diagonal (B, n_flight)."""
+        p = self.split(extra)
+        t = self.sample_times_for(p["period"])[:, : self.n_flight]
+        dt = np.ascontiguousarray(np.diff(t, axis=1, prepend=t[:, :1]))
+        rx = np.ascontiguousarray(residuals[:, self._gyro_xy[:, 0]])
+        ry = np.ascontiguousarray(residuals[:, self._gyro_xy[:, 1]])
+        nut = p["nutation"]
+        return nutation_filter(rx, ry, dt, np.ascontiguousarray(self.log.gyro[:, 2], dtype=float),
+                               np.ascontiguousarray(nut[:, 0]), np.ascontiguousarray(nut[:, 1]),
+                               np.ascontiguousarray(nut[:, 2]))
+
+    def whiten(self, residuals: np.ndarray, extra: np.ndarray | None) -> np.ndarray:
+        """White noise: the residuals; with the randomly forced nutation, the transverse gyro's replaced by the
+        Kalman filter's scaled innovations (:func:`.nutation.nutation_filter`)."""
+        if self.gyro_noise == "white":
+            return residuals
+        ex, ey, _ = self._nutation(residuals, extra)
+        e = residuals.copy()
+        e[:, self._gyro_xy[:, 0]] = ex
+        e[:, self._gyro_xy[:, 1]] = ey
+        return e
+
+    def log_diagonal(self, extra: np.ndarray | None) -> np.ndarray | None:
+        if self.gyro_noise == "white":
+            return None
+        B = extra.shape[0]
+        _, _, ld = self._nutation(np.zeros((B, self._obs.size)), extra)
+        out = np.zeros((B, self._obs.size))
+        out[:, self._gyro_xy[:, 0]] = ld
+        out[:, self._gyro_xy[:, 1]] = ld
+        return out
+
+    def log_det(self, extra: np.ndarray | None) -> np.ndarray | None:
+        if self.gyro_noise == "white":
+            return None
+        B = extra.shape[0]
+        _, _, ld = self._nutation(np.zeros((B, self._obs.size)), extra)
+        out = np.zeros((B, len(self.group_names)))
+        out[:, GROUPS.index("gyro_transverse")] = 2.0 * np.sum(ld, axis=1)
+        return out
 
     def residual_series(self, trajectories, extra, prediction, conditions, reference=None) -> ResidualSeries:
         """Gyro, accelerometer (and magnetometer) residuals along the sensor axes at the samples (module
