@@ -67,7 +67,7 @@ def _fit(r, t, spin):
     return best.x
 
 
-def test_a_drawn_nutation_is_recovered_and_white_noise_gives_none():
+def test_a_drawn_nutation_is_recovered_and_white_noise_shows_none():
     rng = np.random.default_rng(5)
     t, spin = _rows(n=1500, seed=5)
     sigma, lam, kap, a = 0.1, 2.0, 0.93, 3.0
@@ -77,8 +77,11 @@ def test_a_drawn_nutation_is_recovered_and_white_noise_gives_none():
     assert abs(kap_f - kap) < 0.01
     assert 0.6 * lam < lam_f < 1.6 * lam
     assert 0.8 * a < a_f < 1.25 * a
+    # white noise: no evidence for a nutation (3 more parameters; 6 nats is beyond their 99.9 % chance gain)
     white = (sigma * rng.standard_normal(z.shape)).ravel()
-    assert _fit(white, t, spin)[2] < 0.5
+    gain = _profile_nll([lam, kap, 0.0], white, t, spin) - _profile_nll(_fit(white, t, spin), white, t, spin)
+    assert 0.0 <= gain < 6.0
+    assert _profile_nll([lam, kap, 0.0], r, t, spin) - _profile_nll([lam_f, kap_f, a_f], r, t, spin) > 100.0
 
 
 def test_drawn_nutation_has_the_covariance_the_filter_assumes():

@@ -26,7 +26,9 @@ Over a row step Δt_k = t_k − t_(k−1) the exact transition is
     z_k = e^(−λ Δt_k) e^(i κ_N r̄_k Δt_k) z_(k−1) + η_k,    E|η_k|² = 2 a² σ² (1 − e^(−2 λ Δt_k))
 
 with r̄_k the mean of the measured spin rates (gyro z) of the two rows. The Kalman filter in units of σ²
-(P̃ = E|z − ẑ|²/σ², P̃_0 = 2a²: the nutation at release is a stationary draw) runs
+(P̃ = E|z − ẑ|²/σ²) starts from z = 0 at release (P̃_0 = 0: the wobble at release is the flight model's,
+fitted with the throw's initial body rates; the random part builds up after it, towards E|z|² = 2a²σ²
+within about 1/(2λ)) and runs
 
     predict:  ẑ ← e^(−λ Δt) e^(i κ_N r̄ Δt) ẑ,   P̃ ← e^(−2λ Δt) P̃ + 2 a² (1 − e^(−2λ Δt))
     innovate: v_k = r_k − ẑ,   S̃_k = 1 + P̃/2   (per axis, in units of σ²)
@@ -108,7 +110,7 @@ def nutation_filter(rx, ry, dt, spin, decay, kappa, amplitude):
             ld[b, :] = np.nan
             continue
         p_inf = 2.0 * a * a
-        p = p_inf
+        p = 0.0
         zx = 0.0
         zy = 0.0
         for k in range(n):
@@ -133,13 +135,13 @@ def nutation_filter(rx, ry, dt, spin, decay, kappa, amplitude):
 
 def nutation_covariance(t: np.ndarray, spin: np.ndarray, decay: float, kappa: float, amplitude: float) -> np.ndarray:
     """The covariance (2n, 2n) of the transverse gyro noise of n rows in units of σ² (rows x₁ y₁ x₂ y₂ …):
-    the random nutation's plus the identity. Dense, for checking :func:`nutation_filter` and for drawing
-    synthetic residuals.
+    the random nutation's (zero at the first row, the release) plus the identity. Dense, for checking
+    :func:`nutation_filter` and :func:`sample_nutation`.
 
     Parameters
     ----------
     t : (n,) array
-        Row times [s], increasing.
+        Row times [s], increasing; the first is the release.
     spin : (n,) array
         Spin rate of each row [rad/s].
     decay, kappa, amplitude : float
@@ -152,7 +154,9 @@ def nutation_covariance(t: np.ndarray, spin: np.ndarray, decay: float, kappa: fl
     t, spin = np.asarray(t, float), np.asarray(spin, float)
     # phase of the nutation's turning: ∫ κ_N r dt with the row means of r (as the filter)
     phase = np.r_[0.0, np.cumsum(kappa * 0.5 * (spin[1:] + spin[:-1]) * np.diff(t))]
-    dec = np.exp(-decay * np.abs(t[:, None] - t[None, :]))
+    since = t - t[0]
+    # E[z_k z̄_j] / 2 = a² e^(−λ|t_k − t_j|) (1 − e^(−2λ min(t_k, t_j))) e^(i(φ_k − φ_j))
+    dec = np.exp(-decay * np.abs(t[:, None] - t[None, :])) * (1.0 - np.exp(-2.0 * decay * np.minimum.outer(since, since)))
     ang = phase[:, None] - phase[None, :]
     c = amplitude ** 2 * dec * np.cos(ang)                    # E[x_k x_j] = E[y_k y_j]
     s = amplitude ** 2 * dec * np.sin(ang)                    # E[y_k x_j] = −E[x_k y_j]
@@ -168,8 +172,8 @@ def nutation_covariance(t: np.ndarray, spin: np.ndarray, decay: float, kappa: fl
 def sample_nutation(t: np.ndarray, spin: np.ndarray, decay: float, kappa: float, rms: float,
                     rng: np.random.Generator) -> np.ndarray:
     """A randomly forced nutation z (n, 2) [rad/s] (x, y) at the rows t, drawn with the filter's exact
-    transition (module docstring) from a stationary start: what a logger's gyro adds to the flight model's
-    transverse rates.
+    transition (module docstring) from z = 0 at the first row (the release): what a logger's gyro adds to the
+    flight model's transverse rates.
 
     Parameters
     ----------
@@ -180,7 +184,7 @@ def sample_nutation(t: np.ndarray, spin: np.ndarray, decay: float, kappa: float,
     decay, kappa : float
         λ [1/s] (> 0), κ_N [–].
     rms : float
-        The nutation's RMS per axis a σ [rad/s].
+        The nutation's stationary RMS per axis a σ [rad/s].
     rng : numpy.random.Generator
 
     Returns
@@ -192,7 +196,7 @@ def sample_nutation(t: np.ndarray, spin: np.ndarray, decay: float, kappa: float,
     t, spin = np.asarray(t, float), np.asarray(spin, float)
     eps = rng.standard_normal((t.size, 2))
     z = np.empty((t.size, 2))
-    z[0] = rms * eps[0]
+    z[0] = 0.0
     for k in range(1, t.size):
         dt = t[k] - t[k - 1]
         d = np.exp(-decay * dt)
