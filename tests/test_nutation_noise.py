@@ -141,3 +141,27 @@ def test_gyro_noise_config_key(tmp_path):
         load_config(tmp_path / "bad.yaml")
     with pytest.raises(ValueError, match="gyro_noise"):
         InertialMeasurements(_log(), 9.81, period=0.0122, gyro_noise="pink")
+
+
+def test_synthesizer_adds_the_nutation_to_the_flight_rows_only(tmp_path):
+    from dataclasses import replace
+    from bayes_disc.observation.synth import synthesize
+    from bayes_disc.observation.synth_config import synth_spec_from_mapping
+    data = {"name": "n", "seed": 2, "imu": {"gyro_noise": [0.0, 0.0], "acc_noise": [0.0, 0.0],
+                                            "nutation": [0.5, 4.0, 0.9]},
+            "flights": [{"name": "a", "speed": 12.0, "spin": 55, "duration": 1.5}]}
+    spec, _, _ = synth_spec_from_mapping(data, tmp_path / "s.yaml")
+    with_nut = synthesize(spec)
+    plain = synthesize(replace(spec, imu=replace(spec.imu, flights={
+        k: replace(v, nutation=None) for k, v in spec.imu.flights.items()})))
+    d = with_nut.imu_logs[0].gyro - plain.imu_logs[0].gyro
+    moved = np.flatnonzero(np.any(d != 0.0, axis=1))
+    entry = with_nut.truth["imu"]["throws"]["a"]
+    assert moved.min() > entry["release_row"] - with_nut.imu_logs[0].rows[0]       # zero at release, then only in flight
+    assert moved.max() < entry["end_row"] - with_nut.imu_logs[0].rows[0]
+    assert np.all(d[:, 2] == 0.0)
+    assert 0.3 < np.sqrt(np.mean(d[moved, :2] ** 2)) < 0.7
+    assert with_nut.truth["imu"]["logger"]["nutation"] == {"rms_rad_s": 0.5, "decay_per_s": 4.0, "kappa": 0.9}
+    for bad in ([0.5, 0.0, 0.9], [-0.1, 4.0, 0.9], [0.5, 4.0]):
+        with pytest.raises(ConfigError, match="nutation"):
+            synth_spec_from_mapping({**data, "imu": {**data["imu"], "nutation": bad}}, tmp_path / "s.yaml")

@@ -27,7 +27,7 @@ from validation_common import (COEFFICIENTS, PREDICTION_HEADER, ROOT, binomial_b
                                fmt, fold_names, inside, load, outside_probability, prediction_rows, table)
 from validation_fixed_truth import section_fixed_truth  # noqa: E402
 from validation_profile import section_profile_intervals  # noqa: E402
-from validation_wobble import real_wobble, section_real_wobble  # noqa: E402
+from validation_wobble import nutation_blind, real_wobble, section_real_wobble  # noqa: E402
 
 OUT = ROOT / "docs" / "validation.md"
 LEVELS = ("50", "90")
@@ -417,7 +417,7 @@ def section_missing_physics() -> list[str]:
           "runs/concealed_nature/config.yaml --no-sample --overwrite`. The test suite's blind tests "
           "(`tests/test_missing_physics.py`, `tests/test_families.py`, `tests/test_discrepancy.py`; slow ones with "
           "`-m slow`) cover every term, both data explanations, ten data sets with nothing missing and a gust.", ""]
-    return L
+    return L + nutation_blind()
 
 
 # ----------------------------------------------------------------------------------------- real throws

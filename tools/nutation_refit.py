@@ -10,7 +10,8 @@ everything (``--max-nfev`` per round, three rounds of noise re-estimation):
 - ``nutation``: the same with ``gyro_noise: nutation``;
 - ``nutation_without_terms``: ``gyro_noise: nutation`` and no extra physics term.
 
-Per variant: the log-likelihood with every noise scale integrated out, the number of parameters, the fitted
+Per variant: the log-likelihood with every noise scale integrated out, the numbers of parameters and of
+residuals, the fitted
 coefficients, the terms' and the nutation's parameters, and per throw and noise group the RMS of the residuals
 (``rms``); for the transverse gyro also, with the nutation, the white part σ of its noise, the RMS of the
 Kalman filter's innovations (the misfit of a one-row-ahead prediction) and the nutation's RMS a σ.
@@ -61,7 +62,8 @@ def throw_record(problem, theta: np.ndarray, k: int) -> dict:
 
 
 def refit(problem, x0: np.ndarray, max_nfev: int) -> dict:
-    """The nutation's parameters, the initial conditions, then everything, from x0 (module docstring)."""
+    """The nutation's parameters, the initial conditions, then everything, from x0 (module docstring); the
+    record holds the whole parameter vector as ``optimum`` ({name: value}) too."""
     t0 = time.perf_counter()
     nut = np.array([n in NUTATION_START for n in problem.names])
     x = refine_least_squares(problem, x0, max_nfev=NUTATION_NFEV, free=nut).theta if nut.any() else x0
@@ -72,10 +74,12 @@ def refit(problem, x0: np.ndarray, max_nfev: int) -> dict:
     x = refine_least_squares(problem, x, max_nfev=max_nfev, rounds=3).theta
     kept = [n for n in problem.names[:problem.ic_start]] + [n for n in problem.names
                                                             if n in NUTATION_START or n.startswith(("eps_I", "CA", "Cw_"))]
+    n_obs = sum(problem.noise_residuals(x[None], k)[0].shape[1] for k in range(problem.n_flights))
     return {"log_likelihood": float(problem.log_likelihood(x[None])[0]), "n_parameters": int(x.size),
+            "n_observations": int(n_obs),
             "parameters": {n: float(x[problem.names.index(n)]) for n in kept},
             "throws": {f.name: throw_record(problem, x, k) for k, f in enumerate(problem.flights)},
-            "wall_time_s": time.perf_counter() - t0}
+            "wall_time_s": time.perf_counter() - t0, "optimum": dict(zip(problem.names, map(float, x)))}
 
 
 def main(argv=None) -> int:
@@ -104,6 +108,7 @@ def main(argv=None) -> int:
         if missing:
             raise SystemExit(f"{a.start} lacks {missing[:3]}…: not an optimum of {a.config}")
         rec["variants"][name] = refit(problem, np.array([start[n] for n in problem.names]), a.max_nfev)
+        rec["variants"][name].pop("optimum")
         print(name, round(rec["variants"][name]["log_likelihood"], 1), flush=True)
     out.write_text(json.dumps(rec, indent=1))
     print(f"wrote {a.output}")

@@ -27,6 +27,7 @@ from ..physics.frames import quat_to_matrix
 from .imu.formats import InertialLog
 from .models.inertial import low_pass, sensor_rotation
 from .models.magnetometer import MAG_WINDOW
+from .models.nutation import sample_nutation
 
 #: fine-grid points per row period
 SUBSTEPS = 16
@@ -64,6 +65,10 @@ class LoggerSpec:
         Time constant τ_b of the barometer's first-order lag [s] (> 0).
     baro_noise : float
         Barometer reading noise sd [Pa] (every reading differs from the previous one).
+    nutation : (3,) tuple or None
+        A randomly forced nutation added to the flight rows' gyro x and y (:mod:`.models.nutation`): its
+        stationary RMS per axis [rad/s], decay rate λ [1/s] and turning rate κ_N [–]; zero at release.
+        None: none.
     """
 
     offset: tuple = (0.02, 0.0, -0.01)
@@ -81,6 +86,7 @@ class LoggerSpec:
     baro_dynamic: float = 0.0
     baro_lag: float = 0.7
     baro_noise: float = 1.0
+    nutation: tuple | None = None
     truth: dict = field(default_factory=dict, compare=False)
 
 
@@ -172,9 +178,11 @@ def synthetic_log(name: str, initial_state: np.ndarray, coefficients: Coefficien
     gyro, acc, mag, _ = logger_readings(initial_state, coefficients, n_rows, spec, disc, env, terms, extension)
     gs = np.array([spec.gyro_noise[1], spec.gyro_noise[1], spec.gyro_noise[0]])
     as_ = np.array([spec.acc_noise[1], spec.acc_noise[1], spec.acc_noise[0]])
+    spin = gyro[:, 2].copy()
     gyro = gyro + rng.normal(0.0, 1.0, gyro.shape) * gs
     acc = acc + rng.normal(0.0, 1.0, acc.shape) * as_
     mag = _mag_noise(mag, spec, rng)
+    gyro[:, :2] += _nutation(spin, spec, rng)
     rows = np.arange(n_rows)
     return InertialLog(name=name, source="synth", fmt="imu-csv" if timed else "flatball-ins", rows=rows,
                        lines=rows + 2, gyro=gyro, acc=acc, mag=mag, pressure=None,
@@ -185,6 +193,15 @@ def synthetic_log(name: str, initial_state: np.ndarray, coefficients: Coefficien
 PRESSURE_PA = 101325.0
 #: period [s] of the synthetic barometer task (the flatball firmware sleeps 0.1 s between readings)
 BARO_TASK_PERIOD = 0.105
+
+
+def _nutation(spin: np.ndarray, spec: LoggerSpec, rng: np.random.Generator) -> np.ndarray:
+    """(n, 2) the randomly forced nutation of ``spec.nutation`` on n flight rows of spin ``spin`` [rad/s] (zeros
+    and no draw without it)."""
+    if spec.nutation is None:
+        return np.zeros((spin.size, 2))
+    rms, decay, kappa = spec.nutation
+    return sample_nutation(spec.period * np.arange(spin.size), spin, decay, kappa, rms, rng)
 
 
 def _mag_noise(mag: np.ndarray, spec: LoggerSpec, rng: np.random.Generator) -> np.ndarray:
@@ -353,6 +370,7 @@ def recorded_throw(name: str, initial_state: np.ndarray, coefficients: Coefficie
     noisy_acc = acc + rng.normal(0.0, 1.0, acc.shape) * as_
     pressure = _barometer(heights, speeds, spec, rng, env)
     noisy_mag = _mag_noise(mag, spec, rng)
+    noisy_gyro[n_pre: n_pre + n_fly, :2] += _nutation(gyro_f[:, 2], spec, rng)
     rows = first_row + np.arange(gyro.shape[0])
 
     def make(gy, ac, mg):

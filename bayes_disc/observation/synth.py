@@ -249,7 +249,8 @@ def _spec_dict(spec: LoggerSpec) -> dict:
             "acc_noise_m_s2": {"axial": spec.acc_noise[0], "transverse": spec.acc_noise[1]},
             "gyro_bias_rad_s": list(spec.gyro_bias), "acc_bias_m_s2": list(spec.acc_bias),
             "field_uT": list(spec.field_uT), "baro_dynamic": spec.baro_dynamic, "baro_lag_s": spec.baro_lag,
-            "baro_noise_pa": spec.baro_noise}
+            "baro_noise_pa": spec.baro_noise,
+            "nutation": None if spec.nutation is None else dict(zip(("rms_rad_s", "decay_per_s", "kappa"), spec.nutation))}
 
 
 def _inertial_logs(spec: SynthSpec, rng: np.random.Generator, states0: dict) -> tuple[list, dict]:

@@ -49,6 +49,16 @@ def _pair(path, sec: Section, name: str, default) -> tuple:
     return tuple(v)
 
 
+def _nutation(path, sec: Section, default) -> tuple | None:
+    """``nutation: [rms, decay, kappa]`` (rad/s ≥ 0, 1/s > 0, –) or absent (``default``)."""
+    if sec.raw("nutation", None) is None:
+        return default
+    rms, decay, kappa = sec.vector("nutation", 3)
+    if rms < 0 or decay <= 0:
+        raise ConfigError(path, sec.key("nutation"), f"[rms ≥ 0, decay > 0, kappa], got {[rms, decay, kappa]}")
+    return (rms, decay, kappa)
+
+
 def _logger_values(path, sec: Section, base: LoggerSpec, keys) -> LoggerSpec:
     """LoggerSpec ``base`` with the ``keys`` given in ``sec`` replaced."""
     vals = {}
@@ -67,6 +77,7 @@ def _logger_values(path, sec: Section, base: LoggerSpec, keys) -> LoggerSpec:
         "baro_dynamic": lambda: sec.number("baro_dynamic", base.baro_dynamic),
         "baro_lag": lambda: sec.number("baro_lag", base.baro_lag, positive=True),
         "baro_noise": lambda: sec.number("baro_noise", base.baro_noise, nonnegative=True),
+        "nutation": lambda: _nutation(path, sec, base.nutation),
     }
     for k in keys:
         vals[k] = readers[k]()
@@ -80,7 +91,7 @@ def _read_imu_block(path, sec: Section, name: str, raw_flights: list) -> ImuSynt
     s = sec.section("imu")
     logger = _logger_values(path, s, LoggerSpec(), ("offset", "lpf_tau", "tilt", "period", "gyro_noise",
                                                    "acc_noise", "gyro_bias", "acc_bias", "lpf_state", "field_uT",
-                                                   "baro_dynamic", "baro_lag", "baro_noise"))
+                                                   "baro_dynamic", "baro_lag", "baro_noise", "nutation"))
     fmt = s.string("format", "flatball-ins", choices=("flatball-ins", "imu-csv"))
     default_out = f"{name}_imu" if fmt == "flatball-ins" else f"{name}_imu.csv"
     output = path.parent / s.string("output", default_out)
