@@ -5,10 +5,10 @@ A flight model without process noise (an *output-error* fit) must reproduce the 
 landing. A free nutation that is forced along the way — by gusts, turbulence in the air the disc flies
 through, or any moment the model lacks that is not repeatable — has a phase no deterministic model can
 follow; its residual then looks like a narrow-band signal at the wobble's rate and is counted as misfit.
-The *filter-error* method of flight-vehicle identification (Maine & Iliff 1986; Jategaonkar 2015, ch. 5)
-gives that part of the state its own random dynamics and fits the model through a Kalman filter. This unit
-does so for the one mode it concerns, linearised about the simulated flight: the transverse rate the model
-misses,
+The *filter-error* method of flight-vehicle identification (Jategaonkar, Flight Vehicle System
+Identification: A Time Domain Methodology, AIAA, 2nd ed. 2015, ch. 5) gives that part of the state its own
+random dynamics and fits the model through a Kalman filter. This unit does so for the one mode it concerns,
+about the simulated flight: the transverse rate the model misses,
 
     z = δω_x + i δω_y     [rad/s, sensor axes, complex]
 
