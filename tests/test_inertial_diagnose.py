@@ -209,3 +209,30 @@ def test_least_squares_noise_counts_are_the_residuals_behind_each_sigma():
     sigma = np.array([noise[name]["value"] for name in p.sigma_names])
     assert np.all(n > 0)
     np.testing.assert_allclose(n * sigma ** 2, p.sum_squares(ls.theta[None])[0], rtol=1e-9)
+
+
+def _nutation_logs(nutation, seed=3):
+    """LAUNCHES' logs with the logger's transverse gyro carrying a randomly forced nutation (None: none)."""
+    from dataclasses import replace
+    rng = np.random.default_rng(seed)
+    spec = replace(SPEC, nutation=nutation)
+    return [synthetic_log(ls.name, ls.initial_state(), COEF, ls.duration, spec, rng) for ls in LAUNCHES]
+
+
+@pytest.mark.parametrize("nutation", [None, (0.3, 2.0, 0.85)])
+def test_random_nutation_check_at_the_truth(nutation):
+    """diagnose's check on the residuals at the synthesizer's θ: a concealed random nutation (six times the
+    white noise) is found with its turning rate and size; white noise gives none."""
+    from bayes_disc.diagnostics.random_nutation import random_nutation
+    logs = _nutation_logs(nutation)
+    p = builder(logs, starts=[ls.initial_state() for ls in LAUNCHES])(())
+    rec = random_nutation(p, _settle_filter(p, true_theta(p, None)))
+    assert set(rec["throws"]) == {"a", "b"}
+    if nutation is None:
+        assert not rec["found"] and "not a randomly forced nutation" in rec["words"], rec
+        return
+    assert rec["found"] and rec["evidence"] > 100 and "gyro_noise: nutation" in rec["words"]
+    assert abs(rec["kappa"] - nutation[2]) < 0.03
+    for r in rec["throws"].values():
+        assert abs(r["nutation_rms"] / nutation[0] - 1) < 0.35
+        assert abs(r["white_sigma"] / SPEC.gyro_noise[1] - 1) < 0.25

@@ -15,6 +15,9 @@ Writes into the run's output folder:
 * ``wobble`` in ``diagnosis.json``: per inertial throw, the transverse gyro rates of the data and of the base
   fit split into nutation (κ × spin in the body), precession (fixed in space) and a part fixed in sensor
   axes, in sliding windows, compared in words (:mod:`.wobble`); null for a run without inertial throws;
+* ``random_nutation`` in ``diagnosis.json``: whether the base fit's transverse gyro residuals are a randomly
+  forced nutation (:mod:`.random_nutation`: its evidence, rate, decay and size per throw, and words); null for a
+  run without inertial throws fitted with white gyro noise;
 * ``learned_discrepancy`` in ``diagnosis.json``: when the base model leaves structure, a sparse correction
   in functions of height, α and spin learned without assuming a formula (:mod:`.discrepancy`): what it
   selected, whether it whitens the residuals, the flight variable and family it names, and its curve
@@ -65,6 +68,7 @@ from .mismatch import onset_of_mismatch, onset_unavailable
 from .residuals import noise_floor, peak_window
 from .lines import residual_lines
 from .wobble import wobble_records
+from .random_nutation import random_nutation
 from .diagnosis_words import rms_text, words
 
 logger = logging.getLogger(__name__)
@@ -526,6 +530,7 @@ def diagnosis_record(analysis: Analysis, before_est: dict, after_est: dict, refi
         result["learned_discrepancy"] = learned_record(learned, diag) if learned is not None else {
             "selected": 0, "reason": f"no column of the correction reaches |z| ≥ {Z_KEEP:.0f}"}
     result["wobble"] = wobble_records(base.problem, base.ls.theta) or None
+    result["random_nutation"] = random_nutation(base.problem, base.ls.theta)
     result["lines"] = residual_lines(base.residuals) or None
     result["words"] = words(result)
     return result

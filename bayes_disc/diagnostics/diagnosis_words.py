@@ -148,6 +148,7 @@ def words(result: dict) -> str:
         lines.append("RMS " + rms_text(before) + ".")
         lines += [] if noise.get("adopted") else choice_words(noise)
         lines += [w["words"] for w in (result.get("wobble") or {}).values()]
+        lines += [result["random_nutation"]["words"]] if result.get("random_nutation") else []
         lines += lines_words(result)
         if skipped:
             lines.append("Not tried: " + ", ".join(f"{c} ({why})" for c, why in skipped.items()) + ".")
@@ -194,6 +195,7 @@ def words(result: dict) -> str:
     if learned:
         lines.append(learned)
     lines += [w["words"] for w in (result.get("wobble") or {}).values()]
+    lines += [result["random_nutation"]["words"]] if result.get("random_nutation") else []
     lines += lines_words(result)
     if skipped:
         lines.append("Not tried: " + ", ".join(f"{c} ({why})" for c, why in skipped.items()) + ".")
