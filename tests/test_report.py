@@ -339,6 +339,10 @@ def test_verdict_lines_from_their_files():
     assert v.status == "attention" and "side_force (ΔBIC 4540)" in v.text and "out/diagnosis_refit" in v.text
     v = adequacy_verdict(None, "c.yaml", coverage=0.894)
     assert v.status == "not run" and "89 %" in v.text and v.command == "bayes-disc diagnose c.yaml"
+    nut = {"verdict": "missing_physics", "effects": [], "unexplained": [{"flight": "t1"}]}
+    v = adequacy_verdict({**nut, "random_nutation": {"found": True, "evidence": 851.4}}, "c.yaml")
+    assert v.status == "attention" and "randomly forced nutation (ΔBIC 851)" in v.text and "gyro_noise: nutation" in v.text
+    assert "nutation" not in adequacy_verdict({**nut, "random_nutation": {"found": False, "evidence": 3.0}}, "c.yaml").text
 
 
 def test_number_formats():

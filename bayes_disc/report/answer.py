@@ -142,7 +142,7 @@ def adequacy_verdict(diagnosis: dict | None, config_path, coverage: float | None
     ----------
     diagnosis : dict or None
         Content of ``diagnosis.json`` (``verdict`` "adequate" or "missing_physics", ``effects``,
-        ``unexplained``), None when absent.
+        ``unexplained``, ``random_nutation``), None when absent.
     config_path : str or Path
         The run's configuration (for the command).
     coverage : float, optional
@@ -176,6 +176,11 @@ def adequacy_verdict(diagnosis: dict | None, config_path, coverage: float | None
     if flights:
         parts.append(f"{'the rest sits' if isinstance(partial, dict) else 'unexplained structure left'} in "
                      f"{', '.join(map(str, flights))}")
+    nutation = diagnosis.get("random_nutation")
+    if isinstance(nutation, dict) and nutation.get("found"):
+        parts.append(f"the transverse gyro misfit behaves as a randomly forced nutation (ΔBIC "
+                     f"{_evidence(nutation.get('evidence'))}), from which candidates judged with white gyro noise gain "
+                     "evidence: refit with gyro_noise: nutation to judge them without it")
     text = "; ".join(parts) or f"verdict {verdict}"
     refit = (diagnosis.get("settings") or {}).get("refit_run")
     tail = f" The coefficients above are those of the model without it; the refit is in {refit}." if (
