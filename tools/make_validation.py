@@ -27,7 +27,7 @@ from validation_common import (COEFFICIENTS, PREDICTION_HEADER, ROOT, binomial_b
                                fmt, fold_names, inside, load, outside_probability, prediction_rows, table)
 from validation_fixed_truth import section_fixed_truth  # noqa: E402
 from validation_profile import section_profile_intervals  # noqa: E402
-from validation_wobble import nutation_blind, real_wobble, section_real_wobble  # noqa: E402
+from validation_wobble import nutation_blind, random_nutation_lines, real_wobble, section_real_wobble  # noqa: E402
 
 OUT = ROOT / "docs" / "validation.md"
 LEVELS = ("50", "90")
@@ -482,6 +482,7 @@ def section_real() -> list[str]:
             for c in cands[:6]]
     L += table(["candidate", "ΔBIC", "share of the excess removed", "status", "gain per throw"], crow)
     L += [""] + real_lines(diag)
+    L += random_nutation_lines(diag)[1:] + ([""] if diag.get("random_nutation") else [])
     far = max(ratios) if ratios else float("nan")
     L += [f"Verdict: **the misfit is far above the sensor noise** — every sensor group's fitted σ is "
           f"{min(ratios):.1f}–{max(ratios):.1f}× its noise floor, and the transverse gyro misfit is "
@@ -621,7 +622,9 @@ def section_speed() -> list[str]:
           "| compiling the kernels, cold and cached | `python benchmarks/bench_compile.py` |",
           "| video detection, full frame and ROI | `python benchmarks/bench_video.py` |",
           "| averaging over the robust judgement | `python benchmarks/bench_judgement.py` |",
-          "| markers and an inertial logger on the same throws | `python benchmarks/bench_mixed.py` |", ""]
+          "| markers and an inertial logger on the same throws | `python benchmarks/bench_mixed.py` |",
+          "| a log-posterior evaluation with white gyro noise and with the randomly forced nutation | "
+          "`python benchmarks/bench_nutation.py` |", ""]
     return L
 
 

@@ -10,7 +10,7 @@ randomly forced nutation) into ``runs/concealed_nutation/out/`` and fits ``runs/
 - ``nutation``: ``gyro_noise: nutation``, no term, refitted from ``white``;
 - ``nutation_terms``: the nutation and the three terms, refitted from ``nutation``.
 
-Each refit as in ``tools/nutation_refit.py`` (:func:`nutation_refit.refit`). Writes
+Each refit as in ``tools/nutation_refit.py`` (:func:`nutation_refit.refit`, records by :func:`nutation_refit.record`). Writes
 ``runs/concealed_nutation/nutation_blind.json`` (``--output``): the truth (coefficients and the nutation) and
 per variant the log-likelihood, the numbers of parameters and residuals, the parameters and per throw the misfit.
 
@@ -34,22 +34,12 @@ from bayes_disc.inference.model.config import load_config
 from bayes_disc.inference.model.data import build_problem
 from bayes_disc.observation.synth import synthesize, write_synth
 from bayes_disc.observation.synth_config import load_synth_spec
-from nutation_refit import NUTATION_START, refit, throw_record
+from nutation_refit import NUTATION_START, record, refit
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN = "runs/concealed_nutation"
 #: the wobble terms of the real throws' run
 TERMS = ["inertia_ratio", "disc_asymmetry", "rate_damping"]
-
-
-def record(problem, x: np.ndarray, wall: float) -> dict:
-    """The variant's record (:func:`nutation_refit.refit`'s fields) at the optimum x."""
-    n_obs = sum(problem.noise_residuals(x[None], k)[0].shape[1] for k in range(problem.n_flights))
-    kept = [n for n in problem.names[:problem.ic_start]] + [n for n in problem.names if n in NUTATION_START]
-    return {"log_likelihood": float(problem.log_likelihood(x[None])[0]), "n_parameters": int(x.size),
-            "n_observations": int(n_obs), "parameters": {n: float(x[problem.names.index(n)]) for n in kept},
-            "throws": {f.name: throw_record(problem, x, k) for k, f in enumerate(problem.flights)},
-            "wall_time_s": wall}
 
 
 def main(argv=None) -> int:

@@ -72,14 +72,18 @@ def refit(problem, x0: np.ndarray, max_nfev: int) -> dict:
         ic[problem.ic_slice(k)] = True
     x = refine_least_squares(problem, x, max_nfev=IC_NFEV, free=ic).theta
     x = refine_least_squares(problem, x, max_nfev=max_nfev, rounds=3).theta
-    kept = [n for n in problem.names[:problem.ic_start]] + [n for n in problem.names
-                                                            if n in NUTATION_START or n.startswith(("eps_I", "CA", "Cw_"))]
+    return {**record(problem, x, time.perf_counter() - t0), "optimum": dict(zip(problem.names, map(float, x)))}
+
+
+def record(problem, x: np.ndarray, wall: float) -> dict:
+    """A fit's record at the optimum x: log-likelihood, numbers of parameters and residuals, the parameters
+    shared by the throws (coefficients, terms, logger, nutation), per throw :func:`throw_record`, wall time [s]."""
     n_obs = sum(problem.noise_residuals(x[None], k)[0].shape[1] for k in range(problem.n_flights))
     return {"log_likelihood": float(problem.log_likelihood(x[None])[0]), "n_parameters": int(x.size),
             "n_observations": int(n_obs),
-            "parameters": {n: float(x[problem.names.index(n)]) for n in kept},
+            "parameters": {n: float(v) for n, v in zip(problem.names[:problem.ic_start], x)},
             "throws": {f.name: throw_record(problem, x, k) for k, f in enumerate(problem.flights)},
-            "wall_time_s": time.perf_counter() - t0, "optimum": dict(zip(problem.names, map(float, x)))}
+            "wall_time_s": wall}
 
 
 def main(argv=None) -> int:

@@ -116,6 +116,7 @@ def section_real_wobble() -> list[str]:
               f"`{diag['verdict']}`, {len(diag['effects'])} accepted; "
               + ", ".join(f"`{c['id']}` ΔBIC {c['evidence']:.0f} (share of the excess removed "
                           f"{fmt(c.get('share_explained'))}, {c['status']})" for c in cands[:3]) + "."]
+    L += random_nutation_lines(diag)
     L += held_out(pw, throws)
     gyro = [nw[f"sigma_gyro_transverse_{t}"]["value"] for t in throws]
     acc = [n for n in nw if n.startswith("sigma_acc")]
@@ -240,6 +241,22 @@ def nutation_block(throws: list[str]) -> list[str]:
               "RMS above) and the filter follows it row by row. The nutation's forcing is not named, and its κ_N is "
               "the noise's own, not the flight model's free wobble's."]
     return L
+
+
+def random_nutation_lines(diag: dict) -> list[str]:
+    """``diagnose``'s check of a randomly forced nutation at the base fit (``diagnosis.json`` → ``random_nutation``):
+    its evidence, rate, decay and per throw the sizes."""
+    rn = diag.get("random_nutation")
+    if not rn:
+        return []
+    rows = [[t, fmt(r["rms"]), fmt(r["white_sigma"]), fmt(r["nutation_rms"]), fmt(r["innovation_rms"])]
+            for t, r in rn["throws"].items()]
+    return ["", "Randomly forced nutation at the base fit (`diagnosis.json` → `random_nutation`: the noise model of "
+                "`gyro_noise: nutation` fitted to the base fit's transverse gyro residuals, held fixed): "
+                f"{'found' if rn['found'] else 'not found'}, ΔBIC {rn['evidence']:.0f} for 3 parameters, turning at "
+                f"{fmt(rn['kappa'])} × spin, decay {fmt(rn['decay_per_s'])} /s. Per throw, the residuals' RMS, the "
+                "white part σ, the nutation's RMS and the one-row-ahead innovations' RMS [rad/s]:", "",
+            *table(["throw", "residual RMS", "σ white part", "nutation RMS", "innovation RMS"], rows)]
 
 
 def nutation_blind() -> list[str]:
