@@ -25,7 +25,7 @@ from scipy.optimize import minimize
 
 from ..observation.models.inertial import InertialMeasurements
 from ..observation.models.nutation import nutation_filter
-from .residuals import channel_runs
+from .wobble import inertial_gyro
 
 __all__ = ["gyro_residuals", "nutation_gain", "random_nutation", "nutation_words"]
 
@@ -38,12 +38,12 @@ STARTS = ((3.0, 0.8, 5.0), (3.0, 0.95, 5.0), (0.5, 0.9, 3.0))
 def gyro_residuals(problem, theta: np.ndarray, k: int):
     """(row times [s] (n,), transverse gyro residuals model − data (n, 2) [rad/s], measured spin (n,) [rad/s]) of
     flight k's inertial channel at θ (dim,), or None when the flight has none or already fits the nutation."""
-    for c, _, extra, pred, _ in channel_runs(problem, theta, k):
-        if isinstance(c, InertialMeasurements) and c.gyro_noise == "white":
-            t = c.sample_times_for(c.split(extra)["period"])[0, : c.n_flight]
-            gyro = np.asarray(c.log.gyro, float)
-            return t, pred[0, : c.n_flight, :2] - gyro[:, :2], gyro[:, 2].copy()
-    return None
+    got = inertial_gyro(problem, theta, k)
+    if got is None or any(isinstance(m, InertialMeasurements) and m.gyro_noise != "white"
+                          for m in problem.observations[k]):
+        return None
+    t, measured, predicted, _ = got
+    return t, predicted[:, :2] - measured[:, :2], measured[:, 2].copy()
 
 
 def nutation_gain(params, series: list) -> float:

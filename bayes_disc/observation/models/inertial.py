@@ -546,12 +546,15 @@ class InertialMeasurements(ObservationModel):
         e[:, self._gyro_xy[:, 1]] = ey
         return e
 
+    def _nutation_log_diagonal(self, extra: np.ndarray) -> np.ndarray:
+        """(B, n_flight) the filter's −½ ln S̃_k per row (independent of the residuals)."""
+        return self._nutation(np.zeros((extra.shape[0], self._obs.size)), extra)[2]
+
     def log_diagonal(self, extra: np.ndarray | None) -> np.ndarray | None:
         if self.gyro_noise == "white":
             return None
-        B = extra.shape[0]
-        _, _, ld = self._nutation(np.zeros((B, self._obs.size)), extra)
-        out = np.zeros((B, self._obs.size))
+        ld = self._nutation_log_diagonal(extra)
+        out = np.zeros((extra.shape[0], self._obs.size))
         out[:, self._gyro_xy[:, 0]] = ld
         out[:, self._gyro_xy[:, 1]] = ld
         return out
@@ -559,9 +562,8 @@ class InertialMeasurements(ObservationModel):
     def log_det(self, extra: np.ndarray | None) -> np.ndarray | None:
         if self.gyro_noise == "white":
             return None
-        B = extra.shape[0]
-        _, _, ld = self._nutation(np.zeros((B, self._obs.size)), extra)
-        out = np.zeros((B, len(self.group_names)))
+        ld = self._nutation_log_diagonal(extra)
+        out = np.zeros((extra.shape[0], len(self.group_names)))
         out[:, GROUPS.index("gyro_transverse")] = 2.0 * np.sum(ld, axis=1)
         return out
 
