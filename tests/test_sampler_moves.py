@@ -270,6 +270,56 @@ def test_block_factors_of_a_gaussian_are_its_conditionals():
     np.testing.assert_allclose(regression, cov[s:, :s] @ np.linalg.inv(cov[:s, :s]), rtol=1e-8, atol=1e-12)
 
 
+def test_observation_shift_pieces_are_the_conditionals_given_the_coefficients():
+    """observation_shift: the shared observation-model parameters' covariance given the coefficients (a Schur
+    complement of the covariance) and the flights' regression on them under the same conditioning."""
+    from bayes_disc.inference.sampling.moves import observation_shift, shared_conditional
+    t = _ArrowTarget(seed=3, s=3)
+    t.layout.observation_slice = slice(1, 3)                       # one coefficient, two observation parameters
+    _, cov = t.exact()
+    columns, chol, regression = observation_shift(t, cov)
+    np.testing.assert_array_equal(columns, [1, 2])
+    c, o, f = [0], [1, 2], np.arange(3, t.dim)
+    rest = np.r_[o, f]
+    given = cov[np.ix_(rest, rest)] - cov[np.ix_(rest, c)] @ np.linalg.solve(cov[np.ix_(c, c)], cov[np.ix_(c, rest)])
+    np.testing.assert_allclose(chol @ chol.T, given[:2, :2], rtol=1e-8)
+    np.testing.assert_allclose(regression, given[2:, :2] @ np.linalg.inv(given[:2, :2]), rtol=1e-8, atol=1e-12)
+    held = shared_conditional(t, cov)
+    np.testing.assert_allclose(held @ held.T, np.linalg.inv(np.linalg.inv(cov)[:3, :3]), rtol=1e-8)
+    t.layout.observation_slice = slice(3, 3)                       # no observation-model parameters
+    assert observation_shift(t, cov)[0].size == 0
+
+
+def test_observation_shift_follows_a_position_bias_valley_the_held_walk_cannot():
+    """A logger's offset o and every throw's bias b_k seen only as o + b_k (to 0.01): the observation shift,
+    shaped by the exact covariance, carries the biases along and moves o across its posterior; the walk with
+    the flights held moves it by its tiny conditional sd only (MH acceptance ratios of exact draws)."""
+    from types import SimpleNamespace
+    from bayes_disc.inference.sampling.moves import SharedShift, observation_shift, shared_conditional
+    P = np.eye(5)                                                  # θ = (c, o, b_1, b_2, b_3), priors N(0, 1)
+    for k in range(3):
+        a = np.zeros(5)
+        a[[1, 2 + k]] = 1.0 / 0.01
+        P += np.outer(a, a)
+    cov = np.linalg.inv(P)
+    t = SimpleNamespace(ic_start=2, dim=5, layout=SimpleNamespace(observation_slice=slice(1, 2)))
+    rng = np.random.default_rng(4)
+    x = rng.normal(size=(20000, 5)) @ np.linalg.cholesky(cov).T
+
+    def jumps(move):
+        new, factor = move(x, np.random.RandomState(5))
+        assert np.all(factor == 0)
+        log_a = -0.5 * (np.einsum("ni,ij,nj->n", new, P, new) - np.einsum("ni,ij,nj->n", x, P, x))
+        accept = np.exp(np.minimum(log_a, 0.0))
+        return accept.mean(), np.mean(accept * (new[:, 1] - x[:, 1]) ** 2) / cov[1, 1]
+
+    columns, chol, regression = observation_shift(t, cov)
+    carried = jumps(SharedShift(chol, regression, 0.5, columns))
+    held = jumps(SharedShift(shared_conditional(t, cov), None))
+    assert carried[0] > 0.5 and carried[1] > 0.3                  # a third of o's variance per step
+    assert held[1] < 0.01
+
+
 def test_default_walkers_with_block_moves():
     """With block moves: 2·dim + 2 walkers on small problems, capped at WALKERS_CAP but never below the block
     minimum 2·(s + p) + 2; without: 2·dim + 2; an explicit count is made even and kept above the minimum."""
@@ -353,6 +403,20 @@ def _banana_ridge(shift=0.1, widen=1.3):
         chols.append(np.linalg.cholesky(widen * np.array([[s2, 0.5 * s2], [0.5 * s2, 0.25 * s2 + 0.25]])))
     return RidgeProposal(index=0, v=v, log_g=-0.5 * (v / 1.2) ** 2, s=np.full(v.size, 1.2), means=means,
                          slopes=slopes, chols=np.array(chols))
+
+
+def test_ridge_mean_follows_a_bent_valley_floor_between_path_points():
+    """Between path points the conditional mean is the cubic Hermite interpolant of the points with their
+    slopes as tangents: on a parabolic floor x1 = c v² it is the floor itself (a linear blend of the tangent
+    lines misses it by c h² a (1 − a), 0.2 here at mid-segment); beyond the end points, the end tangents."""
+    ridge = _banana_ridge(shift=0.0)
+    c, v = _Banana.c, np.linspace(-5.0, 5.0, 401)
+    _, _, mean = ridge._segment(v)
+    inside = np.abs(v) <= 3.5
+    np.testing.assert_allclose(mean[inside, 0], c * v[inside] ** 2, atol=1e-12)
+    np.testing.assert_allclose(mean[inside, 1], 0.5 * c * v[inside] ** 2, atol=1e-12)
+    end = np.where(v > 0, 3.5, -3.5)[~inside]
+    np.testing.assert_allclose(mean[~inside, 0], c * end ** 2 + 2 * c * end * (v[~inside] - end), atol=1e-12)
 
 
 def test_ridge_whiten_and_place_are_inverse():

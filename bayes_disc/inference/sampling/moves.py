@@ -24,7 +24,11 @@ Three exact Metropolis–Hastings moves follow (each leaves the posterior invari
   is 1; it moves in the s-dimensional subspace where the coefficients' posterior correlations with the
   flights' initial conditions are followed, so its step size does not shrink with the number of flights.
   The regression is linear; along the curved CM0–CMq valley it is not, and on seed 18's 24-flight walkers
-  (``benchmarks/bench_scale.py``) these steps were accepted 0.5 % of the time.
+  (``benchmarks/bench_scale.py``) these steps were accepted 0.5 % of the time. Two variants go with the ridge
+  proposals: the shared parameters alone with the flights held (the shared block's Gibbs step,
+  :func:`shared_conditional`), and the observation models' shared parameters alone, carrying the flights
+  along their regression given the coefficients (:func:`observation_shift`: a logger's position against
+  every throw's accelerometer bias).
 
 And :class:`IndependenceJump` — the independence Metropolis–Hastings jump x′ ~ q, accepted with probability
 min(1, p(x′ | y) q(x) / p(x | y) q(x′)), that keeps ln q of every walker's position after the jump, so a
@@ -68,11 +72,7 @@ def block_factors(problem: Problem, cov: np.ndarray) -> tuple[list[np.ndarray], 
         Σ_(flights),s Σ_ss⁻¹: how every flight's block follows the shared parameters.
     """
     cov = 0.5 * (cov + cov.T)
-    d = np.sqrt(np.diag(cov))
-    corr = cov / np.outer(d, d)
-    w, V = np.linalg.eigh(corr)
-    w = np.maximum(w, 1e-12 * w[-1])
-    precision = (V / w) @ V.T / np.outer(d, d)
+    precision = _precision(cov)
     conditional = []
     for k in range(problem.n_flights):
         sl = problem.layout.flight_slice(k)
@@ -81,6 +81,51 @@ def block_factors(problem: Problem, cov: np.ndarray) -> tuple[list[np.ndarray], 
     Sss = cov[:s, :s]
     regression = np.linalg.solve(Sss, cov[:s, s:]).T
     return conditional, scaled_cholesky(Sss), regression
+
+
+def _precision(cov: np.ndarray) -> np.ndarray:
+    """Σ⁻¹ of a covariance whose scales span many decades (inverted in scale-free form, eigenvalues floored)."""
+    cov = 0.5 * (cov + cov.T)
+    d = np.sqrt(np.diag(cov))
+    w, V = np.linalg.eigh(cov / np.outer(d, d))
+    w = np.maximum(w, 1e-12 * w[-1])
+    return (V / w) @ V.T / np.outer(d, d)
+
+
+def shared_conditional(problem: Problem, cov: np.ndarray) -> np.ndarray:
+    """Cholesky factor (s, s) of Cov(θ_s | every flight's block) = ((Σ⁻¹)_ss)⁻¹ under the Gaussian of
+    covariance ``cov`` (dim, dim): the step shape of :class:`SharedShift` with the flights held."""
+    s = problem.ic_start
+    return scaled_cholesky(np.linalg.inv(_precision(cov)[:s, :s]))
+
+
+def observation_shift(problem: Problem, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pieces of :class:`SharedShift` for the shared observation-model parameters (θ_o, the layout's
+    ``observation_slice``: a logger's position, tilt and magnetometer) with the other shared parameters θ_c
+    (coefficients, terms' parameters) held and the flights carried: under the Gaussian of covariance
+    ``cov`` conditioned on θ_c, the Cholesky factor of Cov(θ_o | θ_c) and the flights' regression on θ_o.
+
+    A logger's position in the disc and every throw's accelerometer bias trade off almost exactly
+    (the centripetal acceleration ω² r at a slowly decaying spin reads like a bias), as do the
+    magnetometer's field and hard iron with the throws' headings: narrow straight valleys across the
+    shared and flight blocks that neither the flight sweeps nor a walk with the flights held can follow.
+
+    Returns
+    -------
+    columns : (o,) int array
+        Positions of θ_o in θ (empty: the run has none).
+    chol : (o, o) array
+    regression : (dim − s, o) array
+    """
+    s, obs = problem.ic_start, problem.layout.observation_slice
+    columns = np.arange(obs.start, obs.stop)
+    if columns.size == 0:
+        return columns, np.zeros((0, 0)), np.zeros((problem.dim - s, 0))
+    kept = np.r_[columns, s:problem.dim]
+    given = np.linalg.inv(_precision(cov)[np.ix_(kept, kept)])     # Cov(θ_o, flights | the other shared)
+    o = columns.size
+    regression = np.linalg.solve(given[:o, :o], given[:o, o:]).T
+    return columns, scaled_cholesky(given[:o, :o]), regression
 
 
 def pick_ridges(log_weights: np.ndarray, n: int, random) -> np.ndarray:
@@ -210,29 +255,45 @@ class RidgeFlightRefresh(_FlightSweep):
 
 @dataclass(frozen=True)
 class SharedShift:
-    """Proposal of the shared random walk that carries the flights along (module docstring); an emcee
-    ``MHMove`` proposal function.
+    """Proposal of the shared random walk that carries the flights along (module docstring), or, without a
+    regression, that holds them; an emcee ``MHMove`` proposal function.
+
+    Held, with the factor of the shared parameters' conditional covariance given the flights
+    (:func:`shared_conditional`, of the Laplace approximation), it is the counterpart of the flight sweeps:
+    the shared block's Metropolis-within-Gibbs step. On the real logger throws, where the coefficients'
+    valley bends with the release speeds, the Laplace approximation's conditional is the local shape there
+    (accepted 10–14 % at the default scale from the walkers of a run, while the same walk with the
+    warm-up samples' conditional, or any move that redraws the shared parameters, was accepted < 1.5 %).
+
+    On a subset of the shared parameters (``columns``) it moves those alone, the other shared parameters
+    held: :func:`observation_shift`.
 
     Attributes
     ----------
-    shared_chol : (s, s) array
-        Cholesky factor of Σ_ss.
-    regression : (dim − s, s) array
-        Σ_ks Σ_ss⁻¹ stacked over the flights.
+    shared_chol : (m, m) array
+        Cholesky factor of Σ_ss (carried), or of Cov(θ_s | flights) (held); m = s, or the subset's size.
+    regression : (dim − s, m) array or None
+        Σ_ks Σ_ss⁻¹ stacked over the flights; None: the flights are held.
     scale : float
-        Multiplies 2.38/√s.
+        Multiplies 2.38/√m.
+    columns : (m,) int array, optional
+        The shared parameters moved (default: all s).
     """
 
     shared_chol: np.ndarray
-    regression: np.ndarray
+    regression: np.ndarray | None
     scale: float = 1.0
+    columns: np.ndarray | None = None
 
     def __call__(self, coords, random):
-        s = self.shared_chol.shape[0]
-        delta = (self.scale * 2.38 / np.sqrt(s)) * random.randn(coords.shape[0], s) @ self.shared_chol.T
+        m = self.shared_chol.shape[0]
+        columns = np.arange(m) if self.columns is None else self.columns
+        delta = (self.scale * 2.38 / np.sqrt(m)) * random.randn(coords.shape[0], m) @ self.shared_chol.T
         new = coords.copy()
-        new[:, :s] += delta
-        new[:, s:] += delta @ self.regression.T
+        new[:, columns] += delta
+        if self.regression is not None:
+            s = new.shape[1] - self.regression.shape[0]
+            new[:, s:] += delta @ self.regression.T
         return new, np.zeros(coords.shape[0])
 
 

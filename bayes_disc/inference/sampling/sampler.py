@@ -27,7 +27,9 @@
   - ridge carries (:class:`.moves.RidgeCarry`, half of the Metropolis–Hastings share when there are
     ridge proposals): the coefficients drawn afresh along a ridge while every flight keeps its whitened
     place across the valley, so that their acceptance does not fall as flights are added (an independence
-    jump redraws every flight too, and pays the proposal's misfit in all of their dimensions);
+    jump redraws every flight too, and pays the proposal's misfit in all of their dimensions); half of
+    them keep the other shared parameters' whitened places too, and so follow a valley that bends in
+    several shared directions at once (:data:`.mixing.CARRY_MIX`);
   - emcee's DE moves, mostly with γ scaled down (local steps accepted often), some at the default γ,
     and snooker moves.
   The Metropolis–Hastings moves (independence jumps and ridge carries) have the larger share
