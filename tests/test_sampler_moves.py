@@ -320,6 +320,33 @@ def test_observation_shift_follows_a_position_bias_valley_the_held_walk_cannot()
     assert held[1] < 0.01
 
 
+def test_move_mixture_with_ridges_and_block_moves():
+    """With ridge proposals and block moves, the mixture holds both kinds of ridge carry (shared places redrawn,
+    and every place kept), the flight sweeps, the shared walk with the flights held and the observation shift,
+    with the configured shares: block moves ``block_fraction`` of the weight, the carries half of the
+    Metropolis–Hastings share, split evenly."""
+    from bayes_disc.inference.sampling.mixing import _moves
+    from bayes_disc.inference.sampling.moves import RidgeCarry
+    from bayes_disc.inference.sampling.proposals import CompositeProposal, Proposal, RidgeProposal
+    t = _ArrowTarget(seed=5, s=3)
+    t.layout.observation_slice = slice(1, 3)
+    mean, cov = t.exact()
+    d = t.dim - 1
+    ridge = RidgeProposal(index=0, v=np.array([-1.0, 0.0, 1.0]), log_g=np.zeros(3), s=np.ones(3),
+                          means=np.tile(mean[1:], (3, 1)), slopes=np.zeros((3, d)), chols=np.tile(np.eye(d), (3, 1, 1)))
+    independence = CompositeProposal((MixtureProposal.from_components([mean], [cov], [0.0]), ridge), np.log([0.5, 0.5]))
+    moves = _moves(t, Proposal.from_cov(mean, cov), independence, 0.8, 0.3, walkers=4)
+    weight = {m.label: w for m, w in moves}
+    assert {"flight sweep, ridge refresh", "flight sweep, random walk", "shared walk, flights held",
+            "observation shift, flights carried"} <= set(weight)
+    block = [w for label, w in weight.items() if label.startswith(("flight sweep", "shared walk", "observation"))]
+    assert sum(block) == pytest.approx(0.3)
+    assert weight["ridge carry, shared redrawn"] == weight["ridge carry, all kept"] == pytest.approx(0.7 * 0.8 * 0.25)
+    fresh = {m.label: m.move.get_proposal.fresh for m, _ in moves if m.label.startswith("ridge carry")}
+    assert fresh == {"ridge carry, shared redrawn": t.ic_start - 1, "ridge carry, all kept": 0}
+    assert all(isinstance(m.move.get_proposal, RidgeCarry) for m, _ in moves if m.label.startswith("ridge"))
+
+
 def test_default_walkers_with_block_moves():
     """With block moves: 2·dim + 2 walkers on small problems, capped at WALKERS_CAP but never below the block
     minimum 2·(s + p) + 2; without: 2·dim + 2; an explicit count is made even and kept above the minimum."""
